@@ -1,0 +1,3 @@
+from parmps.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,315 @@
+"""Case files: TOML, validated strictly against a schema before anything runs.
+
+A case is a TOML document whose tables are the sections of ``SCHEMA``. Every key
+has a type, a range and usually a default; unknown keys, wrong types and values
+out of range raise :class:`CaseError` with one line naming the key. The result
+of :func:`validate` is a plain nested dict with every default filled in.
+"""
+
+import difflib
+import math
+import tomllib
+
+from parmps.errors import CaseError
+
+REQUIRED = object()
+
+
+class Key:
+    """One entry of a section: its type, default and allowed range.
+
+    kind is one of "float", "int", "bool", "str", "vec2" (two floats),
+    "floats" (a list of floats), "ints" (a list of ints) or "options" (a table of
+    scalars passed through, e.g. PETSc options).
+    """
+
+    def __init__(self, kind, default=REQUIRED, *, gt=None, ge=None, lt=None, le=None,
+                 choices=None, doc=""):
+        self.kind = kind
+        self.default = default
+        self.gt, self.ge, self.lt, self.le = gt, ge, lt, le
+        self.choices = choices
+        self.doc = doc
+
+    def check(self, name, value):
+        value = _coerce(name, self.kind, value)
+        for item in (value if self.kind in ("vec2", "floats", "ints") else [value]):
+            self._check_range(name, item)
+        if self.choices is not None and value not in self.choices:
+            raise CaseError(f"{name} must be one of {', '.join(map(repr, self.choices))}, "
+                            f"got {value!r}")
+        return value
+
+    def _check_range(self, name, value):
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            return
+        if self.gt is not None and not value > self.gt:
+            raise CaseError(f"{name} must be > {self.gt}, got {value}")
+        if self.ge is not None and not value >= self.ge:
+            raise CaseError(f"{name} must be >= {self.ge}, got {value}")
+        if self.lt is not None and not value < self.lt:
+            raise CaseError(f"{name} must be < {self.lt}, got {value}")
+        if self.le is not None and not value <= self.le:
+            raise CaseError(f"{name} must be <= {self.le}, got {value}")
+
+
+class Section:
+    """A TOML table (many=False) or an array of tables (many=True)."""
+
+    def __init__(self, keys, *, many=False, required=False, doc=""):
+        self.keys = keys
+        self.many = many
+        self.required = required
+        self.doc = doc
+
+
+def _type_name(value):
+    return {bool: "boolean", int: "integer", float: "number", str: "string",
+            list: "array", dict: "table"}.get(type(value), type(value).__name__)
+
+
+def _coerce(name, kind, value):
+    if kind == "float":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise CaseError(f"{name} must be a number, got {_type_name(value)} {value!r}")
+        value = float(value)
+        if not math.isfinite(value):
+            raise CaseError(f"{name} must be finite, got {value}")
+        return value
+    if kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise CaseError(f"{name} must be an integer, got {_type_name(value)} {value!r}")
+        return value
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise CaseError(f"{name} must be true or false, got {_type_name(value)} {value!r}")
+        return value
+    if kind == "str":
+        if not isinstance(value, str):
+            raise CaseError(f"{name} must be a string, got {_type_name(value)} {value!r}")
+        return value
+    if kind in ("vec2", "floats", "ints"):
+        if not isinstance(value, list):
+            raise CaseError(f"{name} must be an array, got {_type_name(value)} {value!r}")
+        if kind == "vec2" and len(value) != 2:
+            raise CaseError(f"{name} must have 2 components [x, y], got {len(value)}")
+        item_kind = "int" if kind == "ints" else "float"
+        return [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
+    if kind == "options":
+        if not isinstance(value, dict):
+            raise CaseError(f"{name} must be a table, got {_type_name(value)} {value!r}")
+        out = {}
+        for k, v in value.items():
+            if not isinstance(v, (str, int, float, bool)):
+                raise CaseError(f"{name}.{k} must be a string, number or boolean, "
+                                f"got {_type_name(v)}")
+            out[k] = v
+        return out
+    raise AssertionError(f"unknown key kind {kind}")
+
+
+def _unknown(name, key, valid):
+    close = difflib.get_close_matches(key, list(valid), n=1, cutoff=0.5)
+    hint = f" (did you mean '{close[0]}'?)" if close else \
+        f" (valid: {', '.join(sorted(valid))})"
+    where = f"{name}.{key}" if name else key
+    return CaseError(f"unknown key '{where}'{hint}")
+
+
+def _validate_table(name, keys, raw):
+    if not isinstance(raw, dict):
+        raise CaseError(f"{name} must be a table, got {_type_name(raw)}")
+    for key in raw:
+        if key not in keys:
+            raise _unknown(name, key, keys)
+    out = {}
+    for key, spec in keys.items():
+        full = f"{name}.{key}"
+        if key in raw:
+            out[key] = spec.check(full, raw[key])
+        elif spec.default is REQUIRED:
+            raise CaseError(f"missing key '{full}'")
+        else:
+            # Copy list defaults so no two cases share one mutable object.
+            out[key] = list(spec.default) if isinstance(spec.default, list) else spec.default
+    return out
+
+
+VEC_ZERO = (0.0, 0.0)
+
+SCHEMA = {
+    "title": None,  # a free string, checked below
+    "domain": Section({
+        "lower": Key("vec2", doc="lower-left corner; every particle must lie inside"),
+        "upper": Key("vec2", doc="upper-right corner"),
+    }, required=True, doc="the box that holds every particle for the whole run"),
+    "particles": Section({
+        "spacing": Key("float", gt=0.0, doc="initial particle spacing l0 [m]"),
+    }, required=True),
+    "fluid": Section({
+        "density": Key("float", 1000.0, gt=0.0, doc="rho [kg/m^3]"),
+        "viscosity": Key("float", 1.0e-6, ge=0.0, doc="kinematic viscosity nu [m^2/s]"),
+    }),
+    "physics": Section({
+        "gravity": Key("vec2", [0.0, -9.81], doc="[m/s^2]"),
+    }),
+    "mps": Section({
+        "re_number_density": Key("float", 2.1, gt=1.0, le=5.0,
+                                 doc="radius for number density and gradient, in l0"),
+        "re_laplacian": Key("float", 3.1, gt=1.0, le=5.0, doc="radius for the Laplacian, in l0"),
+        "surface_threshold": Key("float", 0.97, gt=0.0, lt=1.0,
+                                 doc="beta: n* < beta n0 marks a free-surface particle"),
+        "neighbour_threshold": Key("float", 0.0, ge=0.0, lt=1.0,
+                                   doc="also surface if neighbour count < this times the "
+                                       "full-lattice count (0 disables)"),
+        "relaxation": Key("float", 0.2, gt=0.0, le=1.0, doc="gamma in the PPE source term"),
+        "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
+        "clamp_negative_pressure": Key("bool", True),
+        "collision": Key("bool", True),
+        "collision_distance": Key("float", 0.5, gt=0.0, lt=1.0, doc="in l0"),
+        "restitution": Key("float", 0.2, ge=0.0, le=1.0),
+    }),
+    "time": Section({
+        "end": Key("float", gt=0.0, doc="end time [s]"),
+        "dt_max": Key("float", 1.0e-3, gt=0.0, doc="largest step [s]"),
+        "fixed_dt": Key("float", 0.0, ge=0.0, doc="a fixed step [s]; 0 means adaptive"),
+        "cfl": Key("float", 0.2, gt=0.0, le=1.0, doc="C_cfl: dt <= C_cfl l0 / |u|max"),
+        "viscous_number": Key("float", 0.2, gt=0.0, le=1.0, doc="dt <= C l0^2 / nu"),
+        "output_interval": Key("float", 0.05, gt=0.0, doc="time between frames [s]"),
+        "max_steps": Key("int", 0, ge=0, doc="stop after this many steps; 0 means no limit"),
+    }, required=True),
+    "pressure": Section({
+        "rtol": Key("float", 1.0e-8, gt=0.0, lt=1.0),
+        "max_iterations": Key("int", 1000, gt=0),
+        "ksp_type": Key("str", "cg"),
+        "pc_type": Key("str", "gamg"),
+        "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),
+    }),
+    "fluid_block": Section({
+        "lower": Key("vec2"),
+        "upper": Key("vec2"),
+        "velocity": Key("vec2", [0.0, 0.0]),
+    }, many=True, doc="a rectangle filled with fluid particles on the l0 lattice"),
+    "tank": Section({
+        "lower": Key("vec2", doc="inner lower-left corner (the wall surface)"),
+        "upper": Key("vec2", doc="inner upper-right corner; the side walls end at its y"),
+        "wall_layers": Key("int", 2, ge=1, le=10),
+        "dummy_layers": Key("int", 2, ge=0, le=10),
+        "open_top": Key("bool", True),
+    }, many=True, doc="walls around a rectangle, with dummy layers behind them"),
+    "wall_box": Section({
+        "lower": Key("vec2"),
+        "upper": Key("vec2"),
+        "wall_layers": Key("int", 2, ge=1, le=10),
+    }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside"),
+    "output": Section({
+        "frames": Key("bool", True, doc="write particle frames (diagnostics are always written)"),
+    }),
+    "parallel": Section({
+        "halo_skin": Key("float", 0.6, ge=0.0, le=5.0,
+                         doc="extra halo width and neighbour-list skin, in l0"),
+        "rebalance_interval": Key("int", 20, gt=0, doc="steps between load-balance checks"),
+        "imbalance_tolerance": Key("float", 1.10, gt=1.0,
+                                   doc="rebalance when max/mean particles exceeds this"),
+    }),
+}
+
+
+def validate(raw):
+    """Check a parsed case against SCHEMA; return it with every default filled in."""
+    if not isinstance(raw, dict):
+        raise CaseError("the case must be a TOML table")
+    for key in raw:
+        if key not in SCHEMA:
+            raise _unknown("", key, SCHEMA)
+    case = {}
+    title = raw.get("title", "")
+    if not isinstance(title, str):
+        raise CaseError(f"title must be a string, got {_type_name(title)}")
+    case["title"] = title
+    for name, section in SCHEMA.items():
+        if section is None:
+            continue
+        if name not in raw:
+            if section.required:
+                raise CaseError(f"missing section [{name}]")
+            case[name] = [] if section.many else _validate_table(name, section.keys, {})
+            continue
+        value = raw[name]
+        if section.many:
+            if isinstance(value, dict):
+                value = [value]
+            if not isinstance(value, list):
+                raise CaseError(f"{name} must be an array of tables ([[{name}]]), "
+                                f"got {_type_name(value)}")
+            case[name] = [_validate_table(f"{name}[{k}]", section.keys, item)
+                          for k, item in enumerate(value)]
+        else:
+            case[name] = _validate_table(name, section.keys, value)
+    _check_consistency(case)
+    return case
+
+
+def _check_consistency(case):
+    lower, upper = case["domain"]["lower"], case["domain"]["upper"]
+    for axis, label in enumerate("xy"):
+        if not upper[axis] > lower[axis]:
+            raise CaseError(f"domain.upper.{label} ({upper[axis]}) must exceed "
+                            f"domain.lower.{label} ({lower[axis]})")
+    for kind in ("fluid_block", "tank", "wall_box"):
+        for k, item in enumerate(case[kind]):
+            for axis, label in enumerate("xy"):
+                if not item["upper"][axis] > item["lower"][axis]:
+                    raise CaseError(f"{kind}[{k}].upper.{label} ({item['upper'][axis]}) must "
+                                    f"exceed {kind}[{k}].lower.{label} ({item['lower'][axis]})")
+    mps = case["mps"]
+    if mps["re_laplacian"] < mps["re_number_density"]:
+        raise CaseError(f"mps.re_laplacian ({mps['re_laplacian']}) must be >= "
+                        f"mps.re_number_density ({mps['re_number_density']})")
+    time = case["time"]
+    if time["fixed_dt"] > 0 and time["fixed_dt"] > time["end"]:
+        raise CaseError(f"time.fixed_dt ({time['fixed_dt']}) exceeds time.end ({time['end']})")
+
+
+def parse_value(text):
+    """A command-line value read as a TOML value; a bare word stays a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_override(raw, assignment):
+    """Apply one ``--set SECTION.KEY=VALUE`` (``SECTION.N.KEY`` for arrays of tables)."""
+    if "=" not in assignment:
+        raise CaseError(f"--set {assignment}: expected SECTION.KEY=VALUE")
+    path, text = assignment.split("=", 1)
+    parts = path.strip().split(".")
+    if len(parts) < 2 or not all(parts):
+        raise CaseError(f"--set {assignment}: expected SECTION.KEY=VALUE")
+    node = raw
+    for depth, part in enumerate(parts[:-1]):
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise CaseError(f"--set {path}: '{part}' is not an index of "
+                                f"{'.'.join(parts[:depth])} (it has {len(node)} entries)")
+            node = node[int(part)]
+            continue
+        if part not in node:
+            node[part] = {}
+        node = node[part]
+        if isinstance(node, list) and depth == len(parts) - 2:
+            raise CaseError(f"--set {path}: {'.'.join(parts[:depth + 1])} is an array of "
+                            f"tables; name the entry, e.g. {parts[0]}.0.{parts[-1]}")
+    if not isinstance(node, dict):
+        raise CaseError(f"--set {path}: {'.'.join(parts[:-1])} is not a table")
+    node[parts[-1]] = parse_value(text.strip())
+    return raw
+
+
+def load_text(text, source="case"):
+    """Parse TOML text; a syntax error becomes a one-line CaseError."""
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"{source}: not valid TOML: {exc}") from None

@@ -1,0 +1,1 @@
+"""Cross-cutting helpers: rank-aware logging, MPI utilities, TOML writing."""
