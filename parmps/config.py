@@ -19,19 +19,30 @@ class Key:
     """One entry of a section: its type, default and allowed range.
 
     kind is one of "float", "int", "bool", "str", "vec2" (two floats),
-    "floats" (a list of floats), "ints" (a list of ints) or "options" (a table of
-    scalars passed through, e.g. PETSc options).
+    "floats" (a list of floats), "ints" (a list of ints), "options" (a table of
+    scalars passed through, e.g. PETSc options), "points" (a list of [x, y]),
+    "pairs" (a list of [i, j] integer pairs) or "tables" (an array of tables,
+    ``[[section.key]]``, each checked against the sub-schema ``keys``).
     """
 
     def __init__(self, kind, default=REQUIRED, *, gt=None, ge=None, lt=None, le=None,
-                 choices=None, doc=""):
+                 choices=None, keys=None, doc=""):
         self.kind = kind
         self.default = default
         self.gt, self.ge, self.lt, self.le = gt, ge, lt, le
         self.choices = choices
+        self.keys = keys
         self.doc = doc
 
     def check(self, name, value):
+        if self.kind == "tables":
+            if isinstance(value, dict):
+                value = [value]
+            if not isinstance(value, list):
+                raise CaseError(f"{name} must be an array of tables ([[{name}]]), "
+                                f"got {_type_name(value)}")
+            return [_validate_table(f"{name}[{k}]", self.keys, item)
+                    for k, item in enumerate(value)]
         value = _coerce(name, self.kind, value)
         for item in (value if self.kind in ("vec2", "floats", "ints") else [value]):
             self._check_range(name, item)
@@ -95,6 +106,16 @@ def _coerce(name, kind, value):
             raise CaseError(f"{name} must have 2 components [x, y], got {len(value)}")
         item_kind = "int" if kind == "ints" else "float"
         return [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
+    if kind in ("points", "pairs"):
+        if not isinstance(value, list):
+            raise CaseError(f"{name} must be an array, got {_type_name(value)} {value!r}")
+        item_kind = "vec2" if kind == "points" else "ints"
+        items = [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
+        if kind == "pairs":
+            for k, item in enumerate(items):
+                if len(item) != 2:
+                    raise CaseError(f"{name}[{k}] must be a pair [i, j], got {len(item)} entries")
+        return items
     if kind == "options":
         if not isinstance(value, dict):
             raise CaseError(f"{name} must be a table, got {_type_name(value)} {value!r}")
@@ -202,6 +223,49 @@ SCHEMA = {
         "upper": Key("vec2"),
         "wall_layers": Key("int", 2, ge=1, le=10),
     }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside"),
+    "solid": Section({
+        "substep": Key("float", 0.0, ge=0.0,
+                       doc="fixed solid substep [s]; 0 chooses it from the stiffest node"),
+        "safety": Key("float", 0.5, gt=0.0, le=1.0,
+                      doc="automatic substep = safety x the Verlet stability limit"),
+    }, doc="mass-spring solver settings shared by every body"),
+    "body": Section({
+        "name": Key("str", "", doc="used in the output; default body<k>"),
+        "type": Key("str", "lattice", choices=("lattice", "general")),
+        "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
+        "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
+        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
+        "lower": Key("vec2", [0.0, 0.0], doc="lattice: position of the lower-left node"),
+        "nodes": Key("points", [], doc="general: node positions [[x, y], ...]"),
+        "springs": Key("pairs", [], doc="general: springs as node index pairs [[i, j], ...]"),
+        "boundary": Key("ints", [], doc="general: the boundary loop, counter-clockwise"),
+        "masses": Key("floats", [], gt=0.0, doc="general: one mass per node [kg]"),
+        "spring_stiffness": Key("floats", [], gt=0.0,
+                                doc="general: one stiffness per spring [N/m]"),
+        "node_mass": Key("float", 0.0, ge=0.0, doc="mass of every node [kg]"),
+        "density": Key("float", 0.0, ge=0.0,
+                       doc="lattice: node mass = density x spacing^2 (per unit depth)"),
+        "stiffness": Key("float", gt=0.0, doc="structural (or every) spring [N/m]"),
+        "shear_stiffness": Key("float", 0.0, ge=0.0,
+                               doc="lattice diagonal springs [N/m]; 0 means = stiffness"),
+        "damping": Key("float", 0.0, ge=0.0, doc="b in -b (v_i - v_j) [N s/m]"),
+        "volume_constraint": Key("bool", True, doc="keep the boundary polygon's area"),
+        "gravity": Key("bool", True, doc="feel physics.gravity"),
+        "velocity": Key("vec2", [0.0, 0.0], doc="initial velocity of every node [m/s]"),
+        "pinned": Key("str", "none", choices=("none", "top", "bottom", "left", "right", "all"),
+                      doc="a side whose nodes never move"),
+        "pinned_ids": Key("ints", [], ge=0, doc="more nodes that never move"),
+        "load": Key("tables", [], keys={
+            "nodes": Key("str", choices=("top", "bottom", "left", "right", "all", "row",
+                                         "column", "ids")),
+            "index": Key("int", 0, ge=0, doc="the row or column (from 0 at bottom/left)"),
+            "ids": Key("ints", [], ge=0, doc="the nodes, with nodes = \"ids\""),
+            "force": Key("vec2", doc="force on each node of the set [N]"),
+            "start": Key("float", 0.0, ge=0.0, doc="[s]"),
+            "end": Key("float", math.inf, gt=0.0, doc="[s]; default: never ends"),
+            "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
+        }, doc="[[body.load]]: a force on a node set over a time window"),
+    }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
     "output": Section({
         "frames": Key("bool", True, doc="write particle frames (diagnostics are always written)"),
     }),
@@ -269,6 +333,10 @@ def _check_consistency(case):
     time = case["time"]
     if time["fixed_dt"] > 0 and time["fixed_dt"] > time["end"]:
         raise CaseError(f"time.fixed_dt ({time['fixed_dt']}) exceeds time.end ({time['end']})")
+    if case["body"]:
+        # Bodies are small: building them is the cheapest complete check.
+        from parmps.bodies import build_bodies
+        build_bodies(case)
 
 
 def parse_value(text):
