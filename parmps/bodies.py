@@ -55,13 +55,13 @@ def lattice_geometry(nx, ny, spacing, lower):
     return position, springs, shear, boundary
 
 
-def _segments_cross(a, b, c, d):
-    """For segment arrays ab and cd (broadcast), whether they touch or cross."""
+def _segments_cross(a, b, c, d, scale):
+    """For segment arrays ab and cd, whether they touch or cross (``scale``: the loop's size)."""
     def orient(p, q, r):
         return ((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1])
                 - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
 
-    scale = max(float(np.ptp(np.concatenate([a, b]).reshape(-1, 2), axis=0).max()), 1e-300)
+    scale = max(scale, 1e-300)
     tol = 1e-12 * scale ** 2
     o1, o2 = orient(a, b, c), orient(a, b, d)
     o3, o4 = orient(c, d, a), orient(c, d, b)
@@ -100,7 +100,8 @@ def check_boundary(label, position, loop):
     # Edges k and k+1 share a node, and so do the last and the first.
     keep = ~((first == 0) & (second == m - 1))
     first, second = first[keep], second[keep]
-    crossing = _segments_cross(start[first], end[first], start[second], end[second])
+    crossing = _segments_cross(start[first], end[first], start[second], end[second],
+                               scale=float(np.ptp(start, axis=0).max()))
     if crossing.any():
         e, f = int(first[crossing][0]), int(second[crossing][0])
         raise CaseError(f"{label}.boundary is not a simple polygon: edge "

@@ -228,6 +228,10 @@ SCHEMA = {
                        doc="fixed solid substep [s]; 0 chooses it from the stiffest node"),
         "safety": Key("float", 0.5, gt=0.0, le=1.0,
                       doc="automatic substep = safety x the Verlet stability limit"),
+        "constraint_prediction": Key("str", "linear", choices=("linear", "quadratic"),
+                                     doc="linear: the area multiplier of DESIGN.md 1.5; "
+                                         "quadratic: also predicts the area swept in a "
+                                         "substep (rotating bodies)"),
     }, doc="mass-spring solver settings shared by every body"),
     "body": Section({
         "name": Key("str", "", doc="used in the output; default body<k>"),
