@@ -1,0 +1,424 @@
+"""Checks of parmps.decomposition, run on every rank of a job.
+
+Usage: mpirun -n N python tests/mpi/decomposition_worker.py checks RESULT.json
+       mpirun -n N python tests/mpi/decomposition_worker.py abort
+
+``checks`` runs every check in CHECKS; each one asserts collectively (all ranks
+pass or fail together), and rank 0 writes {check name: null or the failure} to
+RESULT.json. An unexpected exception aborts the whole job. ``abort`` raises on
+the last rank while the others wait in a barrier: the job must end, not hang.
+
+The checks also run on one rank inside pytest (tests/test_decomposition.py).
+"""
+
+import json
+import sys
+
+import numpy as np
+from mpi4py import MPI
+
+from parmps import config
+from parmps.decomposition import SlabDecomposition
+from parmps.errors import CaseError
+from parmps.particles import DUMMY, FLUID, WALL, Particles
+from parmps.tools.parallel import abort_on_exception, assert_all
+
+SPACING = 1.0
+HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
+
+
+def make_case(lower_x, upper_x, **parallel):
+    return config.validate({
+        "domain": {"lower": [lower_x, 0.0], "upper": [upper_x, 10.0]},
+        "particles": {"spacing": SPACING},
+        "time": {"end": 1.0},
+        "parallel": parallel,
+    })
+
+
+def scene(position, kind=None):
+    """A global scene with ids 0..N-1 whose velocity and pressure encode the id."""
+    n = len(position)
+    ids = np.arange(n, dtype=np.int64)
+    return Particles({
+        "id": ids,
+        "kind": np.full(n, FLUID, np.int8) if kind is None else kind,
+        "position": position,
+        "velocity": np.column_stack([ids * 1.0, -ids * 2.0]),
+        "pressure": ids * 0.25,
+    })
+
+
+def lattice(nx, ny, x0=0.0):
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
+    return np.column_stack([x0 + (i.ravel() + 0.5) * SPACING, (j.ravel() + 0.5) * SPACING])
+
+
+def random_scene(n, x_max, seed=1):
+    rng = np.random.default_rng(seed)
+    return scene(np.column_stack([rng.uniform(0.0, x_max, n), rng.uniform(0.0, 10.0, n)]))
+
+
+def all_ids(comm, particles):
+    """Every rank's owned ids, concatenated in rank order (the same on every rank)."""
+    return np.concatenate(comm.allgather(particles.id[:particles.n_owned]))
+
+
+def check_ownership(comm, decomposition, particles, n_total, what):
+    ids = all_ids(comm, particles)
+    assert_all(comm, np.array_equal(np.sort(ids), np.arange(n_total)),
+               lambda: f"{what}: global ids are not exactly 0..{n_total - 1}: "
+                       f"{len(ids)} ids, {len(np.unique(ids))} distinct")
+    x = particles.position[:particles.n_owned, 0]
+    lo, hi = decomposition.slab
+    assert_all(comm, np.all((x >= lo) & (x < hi)),
+               lambda: f"{what}: owned x outside this rank's slab [{lo}, {hi})")
+    own = particles.id[:particles.n_owned]
+    assert_all(comm, np.all(np.diff(own) > 0), f"{what}: owned ids not ascending")
+    assert_all(comm, np.allclose(particles.velocity[:particles.n_owned],
+                                 np.column_stack([own * 1.0, -own * 2.0])),
+               f"{what}: velocity did not travel with its particle")
+
+
+# --- the checks ---------------------------------------------------------------------------------
+
+def check_distribute_counts(comm):
+    """Known lattices give known per-rank counts and edges between columns."""
+    expected = {1: [120], 2: [60, 60], 3: [40, 40, 40]}
+    decomposition = SlabDecomposition(comm, make_case(0.0, 24.0))
+    mine = decomposition.distribute(scene(lattice(24, 5)))
+    if comm.size in expected:
+        counts = list(decomposition.counts(mine))
+        assert_all(comm, counts == expected[comm.size],
+                   f"24x5 lattice: counts {counts}, expected {expected[comm.size]}")
+        edges = {1: [], 2: [12.0], 3: [8.0, 16.0]}[comm.size]
+        assert_all(comm, np.allclose(decomposition.interior_edges, edges),
+                   f"24x5 lattice: edges {decomposition.interior_edges}, expected {edges}")
+    check_ownership(comm, decomposition, mine, 120, "24x5 lattice")
+    # 25 columns of 4: the edges go to the column gap nearest each quantile.
+    expected = {1: [100], 2: [48, 52], 3: [32, 36, 32]}
+    decomposition = SlabDecomposition(comm, make_case(0.0, 25.0))
+    mine = decomposition.distribute(scene(lattice(25, 4)))
+    if comm.size in expected:
+        counts = list(decomposition.counts(mine))
+        assert_all(comm, counts == expected[comm.size],
+                   f"25x4 lattice: counts {counts}, expected {expected[comm.size]}")
+    check_ownership(comm, decomposition, mine, 100, "25x4 lattice")
+
+
+def _expected_ghosts(decomposition, global_x, rank):
+    """Ghost ids of ``rank`` by brute force: left neighbour's then right neighbour's, by id."""
+    owner = decomposition.owner(global_x)
+    edges = decomposition.edges
+    ids = np.arange(len(global_x))
+    from_left = ids[(owner == rank - 1) & (edges[rank] - global_x < decomposition.halo_width)] \
+        if rank > 0 else ids[:0]
+    from_right = ids[(owner == rank + 1)
+                     & (global_x - edges[rank + 1] < decomposition.halo_width)] \
+        if rank < decomposition.size - 1 else ids[:0]
+    return np.concatenate([from_left, from_right])
+
+
+def check_halo(comm):
+    """Ghosts are exactly the neighbours' particles within the halo width, in a fixed order."""
+    global_scene = random_scene(1500, 30.0, seed=2)
+    # Some particles exactly at the halo distance and on lattice-like repeated x.
+    global_scene.position[:40, 0] = np.repeat(np.linspace(5.0, 25.0, 10), 4)
+    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    mine = decomposition.distribute(global_scene)
+    halo = decomposition.build_halo(mine)
+    n = halo.n_owned
+    expected = _expected_ghosts(decomposition, global_scene.position[:, 0], comm.rank)
+    assert_all(comm, n == mine.n_owned and halo.n_ghost == decomposition.n_ghost,
+               "build_halo changed n_owned or miscounted ghosts")
+    assert_all(comm, np.array_equal(halo.id[n:], expected),
+               lambda: f"ghost ids {halo.id[n:][:10]}... ({halo.n_ghost}) != brute force "
+                       f"{expected[:10]}... ({len(expected)})")
+    for name in ("position", "velocity", "pressure", "kind"):
+        assert_all(comm, np.array_equal(halo.arrays[name][n:],
+                                        global_scene.arrays[name][halo.id[n:]]),
+                   f"ghost field {name} differs from its owner's")
+    # Completeness: every particle within re_laplacian of an owned one is here.
+    radius = 3.1 * SPACING
+    local = set(halo.id.tolist())
+    position = global_scene.position
+    missing = 0
+    for start in range(0, n, 256):
+        block = halo.position[start:min(start + 256, n)]
+        d2 = ((block[:, None, :] - position[None, :, :]) ** 2).sum(axis=2)
+        near = np.unique(np.nonzero(d2 < radius * radius)[1])
+        missing += sum(1 for j in near.tolist() if j not in local)
+    assert_all(comm, missing == 0, f"{missing} neighbours within re of owned particles "
+                                   f"are neither owned nor ghosts")
+    # A second build_halo from the halo'd Particles drops the old ghosts first.
+    again = decomposition.build_halo(halo)
+    assert_all(comm, np.array_equal(again.id, halo.id), "build_halo is not idempotent")
+
+
+def check_refresh(comm):
+    """refresh() copies the owners' current values into the ghosts, in place, any dtype/shape."""
+    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    halo = decomposition.build_halo(decomposition.distribute(random_scene(1500, 30.0, seed=3)))
+    n, ids = halo.n_owned, halo.id
+    total = len(halo)
+    values = np.full(total, np.nan)
+    rows = np.full(total, -1, np.int64)
+    block = np.full((total, 3), np.nan, np.float32)
+    small = np.zeros(total, np.int8)
+    flags = np.zeros(total, bool)
+    pair = np.full((total, 2), np.nan)
+    values[:n] = ids[:n] * 1.5 + 1.0
+    rows[:n] = ids[:n] + 1000
+    block[:n] = np.column_stack([ids[:n], ids[:n] + 1, ids[:n] + 2]).astype(np.float32)
+    small[:n] = (ids[:n] % 100).astype(np.int8)
+    flags[:n] = ids[:n] % 2 == 1
+    pair[:n] = np.column_stack([ids[:n] * 3.0, ids[:n] * 4.0])
+    column = pair[:, 1]  # a non-contiguous view, refreshed in place
+    returned = decomposition.refresh([values, rows, block, small, flags, column])
+    g = ids[n:]
+    assert_all(comm, isinstance(returned, list) and returned[0] is values,
+               "refresh did not return its argument")
+    assert_all(comm, np.array_equal(values[n:], g * 1.5 + 1.0), "float ghosts not refreshed")
+    assert_all(comm, np.array_equal(rows[n:], g + 1000), "int64 ghosts not refreshed")
+    assert_all(comm, np.array_equal(block[n:], np.column_stack([g, g + 1, g + 2])
+                                    .astype(np.float32)), "N x 3 float32 ghosts not refreshed")
+    assert_all(comm, np.array_equal(small[n:], (g % 100).astype(np.int8)), "int8 ghosts")
+    assert_all(comm, np.array_equal(flags[n:], g % 2 == 1), "bool ghosts not refreshed")
+    assert_all(comm, np.array_equal(pair[n:, 1], g * 4.0) and np.all(np.isnan(pair[n:, 0])),
+               "a non-contiguous column was not refreshed in place (or touched its neighbour)")
+    # A single array and a whole Particles.
+    values[n:] = -1.0
+    decomposition.refresh(values)
+    assert_all(comm, np.array_equal(values[n:], g * 1.5 + 1.0), "single-array refresh")
+    halo.position[:n] += 0.125
+    halo.pressure[:n] = -halo.id[:n]
+    decomposition.refresh(halo)
+    owner_x = np.concatenate(comm.allgather(halo.position[:n]))
+    owner_id = np.concatenate(comm.allgather(halo.id[:n]))
+    lookup = np.empty_like(owner_x)
+    lookup[owner_id] = owner_x
+    assert_all(comm, np.array_equal(halo.position[n:], lookup[g]), "Particles refresh: position")
+    assert_all(comm, np.array_equal(halo.pressure[n:], -g.astype(float)),
+               "Particles refresh: pressure")
+    # Wrong length is refused.
+    failed = False
+    try:
+        decomposition.refresh([values[:n]])
+    except ValueError:
+        failed = True
+    assert_all(comm, failed or len(g) == 0 and comm.size == 1,
+               "refresh accepted an array of the wrong length")
+
+
+def _moved_x(x, ids, edges, pattern):
+    """A deterministic motion of every particle (the same on every rank)."""
+    x = x.copy()
+    interior = edges[1:-1]
+    if pattern == "small":
+        x += np.where(ids % 3 == 0, 0.7, np.where(ids % 3 == 1, -0.45, 0.0))
+    else:  # jumps over several slabs, and particles exactly on the edges
+        span = edges[-1] - edges[0]
+        x = np.where(ids % 4 == 0, edges[-1] - x + edges[0], x)   # mirror: far jumps
+        x = np.where(ids % 4 == 1, x + 0.5 * span, x)
+        if len(interior):
+            on_edge = ids % 37 == 0
+            x[on_edge] = interior[ids[on_edge] % len(interior)]
+    return x
+
+
+def check_migrate(comm):
+    """Migration keeps every id exactly once and delivers each to its new owner."""
+    for pattern in ("small", "far"):
+        global_scene = random_scene(2000, 30.0, seed=4)
+        decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+        mine = decomposition.distribute(global_scene)
+        halo = decomposition.build_halo(mine)
+        edges = decomposition.edges
+        new_x = _moved_x(global_scene.position[:, 0], global_scene.id, edges, pattern)
+        halo.position[:, 0] = new_x[halo.id]
+        migrated = decomposition.migrate(halo)
+        assert_all(comm, migrated.n_ghost == 0, "migrate kept ghosts")
+        check_ownership(comm, decomposition, migrated, 2000, f"migrate ({pattern})")
+        expected = np.flatnonzero(decomposition.owner(new_x) == comm.rank)
+        assert_all(comm, np.array_equal(migrated.id, expected),
+                   f"migrate ({pattern}): owned ids differ from the brute-force owners")
+        assert_all(comm, np.array_equal(migrated.position[:, 0], new_x[migrated.id]),
+                   f"migrate ({pattern}): positions corrupted")
+        if pattern == "far" and comm.size > 1:
+            on_edge = np.flatnonzero(global_scene.id % 37 == 0)
+            mine_on_edge = np.intersect1d(migrated.id, on_edge)
+            counted = comm.allreduce(len(mine_on_edge))
+            assert_all(comm, counted == len(on_edge), "a particle on an edge is owned "
+                                                      f"{counted} times for {len(on_edge)}")
+            right = decomposition.owner(new_x[mine_on_edge])
+            assert_all(comm, np.all(right == comm.rank), "edge particle not with the right slab")
+
+
+def check_rebalance(comm):
+    """A skewed load comes back within the tolerance; a balanced one is left alone."""
+    tolerance = 1.10
+    global_scene = random_scene(6000, 60.0, seed=5)
+    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    mine = decomposition.distribute(global_scene)
+    mine.position[:, 0] = 60.0 * (mine.position[:, 0] / 60.0) ** 3
+    mine = decomposition.migrate(mine)
+    before = decomposition.imbalance(mine)
+    if comm.size > 1:
+        assert_all(comm, before > 1.5, f"the skewed scene is not imbalanced ({before:.3f})")
+    same = decomposition.rebalance(decomposition.build_halo(mine), step=6)
+    assert_all(comm, decomposition.rebalance_count == 0 and np.array_equal(same.id, mine.id)
+               and same.n_ghost == 0, "rebalance acted off its interval")
+    balanced = decomposition.rebalance(mine, step=8)
+    after = decomposition.imbalance(balanced)
+    assert_all(comm, after <= tolerance, f"imbalance {after:.4f} after rebalancing "
+                                         f"(was {before:.3f})")
+    assert_all(comm, decomposition.rebalance_count == (1 if comm.size > 1 else 0),
+               f"{decomposition.rebalance_count} rebalances, expected one")
+    check_ownership(comm, decomposition, balanced, 6000, "rebalance")
+    edges = decomposition.edges.copy()
+    again = decomposition.rebalance(balanced, step=12)
+    assert_all(comm, np.array_equal(edges, decomposition.edges)
+               and np.array_equal(again.id, balanced.id), "a balanced load was rebalanced")
+
+
+def check_sweep(comm):
+    """Water moving from one end of a tank to the other stays within 110 % with rebalancing."""
+    nx, ny, layers, interval = 120, 24, 4, 5
+    tank = lattice(nx + 2 * layers, ny + layers, x0=-layers)
+    tank[:, 1] -= layers
+    inside = (tank[:, 0] > 0) & (tank[:, 0] < nx) & (tank[:, 1] > 0)
+    walls = tank[~inside]
+    water = lattice(30, 20, x0=0.0)
+    position = np.concatenate([walls, water])
+    kind = np.concatenate([np.full(len(walls), WALL, np.int8),
+                           np.full(len(water), FLUID, np.int8)])
+    kind[:len(walls)][np.abs(walls[:, 0] - nx / 2) > nx / 2 + 2] = DUMMY
+    global_scene = scene(position, kind)
+    n_total, n_walls = len(position), len(walls)
+    decomposition = SlabDecomposition(
+        comm, make_case(-layers, nx + layers, rebalance_interval=interval))
+    mine = decomposition.distribute(global_scene)
+    worst_checked = worst = 1.0
+    for step in range(1, 451):
+        halo = decomposition.build_halo(mine)
+        owned = halo.id[:halo.n_owned]
+        fluid = owned >= n_walls
+        # The water block slides right at 0.2 l0 per step until it meets the far wall.
+        x0 = (owned[fluid] - n_walls) % 30 + 0.5
+        halo.position[:halo.n_owned][fluid, 0] = x0 + min(0.2 * step, nx - 30.0)
+        mine = decomposition.migrate(halo)
+        mine = decomposition.rebalance(mine, step)
+        imbalance = decomposition.imbalance(mine)
+        worst = max(worst, imbalance)
+        if step % interval == 0:
+            worst_checked = max(worst_checked, imbalance)
+    check_ownership(comm, decomposition, mine, n_total, "sweep")
+    assert_all(comm, worst_checked <= 1.10,
+               f"imbalance {worst_checked:.3f} right after a rebalance check")
+    assert_all(comm, worst <= 1.10, f"imbalance reached {worst:.3f} between checks")
+    if comm.size > 1:
+        assert_all(comm, decomposition.rebalance_count > 0, "the sweep never rebalanced")
+        assert_all(comm, decomposition.halo_seconds > 0 and decomposition.migration_seconds > 0,
+                   "halo/migration timers did not run")
+
+
+def _errors(comm, action):
+    """Run ``action``; return the CaseError message raised on this rank (or None)."""
+    try:
+        action()
+    except CaseError as error:
+        return str(error)
+    return None
+
+
+def check_refusals(comm):
+    """Too many ranks or too thin slabs: the same CaseError on every rank."""
+    # A domain 5 wide holds one slab of the 3.7-wide halo.
+    message = _errors(comm, lambda: SlabDecomposition(comm, make_case(0.0, 5.0)))
+    messages = comm.allgather(message)
+    if comm.size > 1:
+        assert_all(comm, message is not None and len(set(messages)) == 1,
+                   f"too many ranks: messages {messages}")
+        assert_all(comm, "at most 1" in message, f"unclear message: {message}")
+    else:
+        assert_all(comm, message is None, f"one rank refused: {message}")
+    # Room for the slabs, but every particle in one narrow band: interior slabs too thin.
+    band = scene(np.column_stack([np.linspace(50.0, 51.0, 3000), np.full(3000, 5.0)]))
+    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0))
+    message = _errors(comm, lambda: decomposition.distribute(band))
+    messages = comm.allgather(message)
+    if comm.size > 2:
+        assert_all(comm, message is not None and len(set(messages)) == 1,
+                   f"thin slab: messages {messages}")
+        assert_all(comm, "thinner than the halo" in message, f"unclear message: {message}")
+    else:  # two slabs have no interior slab: nothing is too thin
+        assert_all(comm, message is None, f"refused without an interior slab: {message}")
+    # After a rebalance: keep the old edges instead (a warning), never fail.
+    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0, rebalance_interval=1))
+    mine = decomposition.distribute(random_scene(3000, 100.0, seed=6))
+    edges = decomposition.edges.copy()
+    mine.position[:, 0] = 50.0 + mine.id / 3000.0
+    mine = decomposition.rebalance(decomposition.migrate(mine), step=1)
+    if comm.size > 2:
+        assert_all(comm, np.array_equal(edges, decomposition.edges),
+                   "a rebalance made slabs thinner than the halo")
+    check_ownership(comm, decomposition, mine, 3000, "refused rebalance")
+
+
+def check_empty_rank(comm):
+    """A rank with no particles still takes part in every collective call."""
+    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0, rebalance_interval=1))
+    mine = decomposition.distribute(random_scene(600, 30.0, seed=7))
+    # Everything moves to the first slab: the other ranks end up empty.
+    mine.position[:, 0] = 0.01 * mine.id / 600.0
+    mine = decomposition.migrate(mine)
+    halo = decomposition.build_halo(mine)
+    decomposition.refresh([halo.pressure, halo.velocity])
+    imbalance = decomposition.imbalance(halo)
+    assert_all(comm, abs(imbalance - comm.size) < 1e-12, f"imbalance {imbalance}")
+    mine = decomposition.rebalance(halo, step=1)  # all x within 0.01: refused, not hung
+    check_ownership(comm, decomposition, mine, 600, "empty ranks")
+
+
+CHECKS = {
+    "distribute_counts": check_distribute_counts,
+    "halo": check_halo,
+    "refresh": check_refresh,
+    "migrate": check_migrate,
+    "rebalance": check_rebalance,
+    "sweep": check_sweep,
+    "refusals": check_refusals,
+    "empty_rank": check_empty_rank,
+}
+
+
+def run_checks(comm, names=None):
+    results = {}
+    for name in names or CHECKS:
+        try:
+            CHECKS[name](comm)
+            results[name] = None
+        except AssertionError as error:  # collective: every rank is here together
+            results[name] = str(error) or "assertion failed"
+    return results
+
+
+def main(argv):
+    comm = MPI.COMM_WORLD
+    with abort_on_exception(comm):
+        if argv[1] == "checks":
+            results = run_checks(comm, argv[3:] or None)
+            if comm.rank == 0:
+                with open(argv[2], "w") as handle:
+                    json.dump(results, handle)
+        elif argv[1] == "abort":
+            if comm.rank == comm.size - 1:
+                raise ValueError("boom on purpose")
+            comm.Barrier()  # would wait for ever without the abort
+        else:
+            raise SystemExit(f"unknown mode {argv[1]!r}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
