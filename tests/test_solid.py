@@ -111,6 +111,26 @@ def test_two_node_spring_period_and_energy():
     assert drift < 1e-4
 
 
+def test_two_node_spring_at_the_automatic_substep():
+    # The automatic substep is chosen for stability (safety 0.5 of the limit),
+    # not accuracy: the period then follows Verlet's omega_h = 2 asin(omega h / 2).
+    system, body, period = two_node_system(0.0)
+    h = system.stable_substep()
+    omega = 2 * math.pi / period
+    assert omega * h < 2
+    expected = 2 * math.pi / (2 * math.asin(omega * h / 2) / h)
+    energy0 = sum(body.energy())
+    samples = run(system, h, int(100 * period / h),
+                  lambda: (body.position[1, 0] - body.position[0, 0] - body.rest_length[0],
+                           sum(body.energy())))
+    stretch = samples[:, 0]
+    k = np.flatnonzero((stretch[:-1] < 0) & (stretch[1:] >= 0))
+    crossing = h * (k + 1) + h * (-stretch[k]) / (stretch[k + 1] - stretch[k])
+    measured = (crossing[-1] - crossing[0]) / (len(crossing) - 1)
+    assert measured == pytest.approx(expected, rel=2e-3)
+    assert np.max(np.abs(samples[:, 1] / energy0 - 1)) < 0.5
+
+
 # ---------------------------------------------------------------------------
 # Momentum and the constraint
 
