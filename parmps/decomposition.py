@@ -34,9 +34,12 @@ Order. Owned particles are kept in ascending global id after every
 :meth:`distribute` and :meth:`migrate`, so the local order does not depend on
 the rank count or on the history of migrations.
 
-Messages. Particle data travels as packed bytes through buffer-based calls
-(``Sendrecv`` with the counts exchanged first, ``Alltoallv`` when a particle
-has to jump more than one slab); nothing is pickled on the per-step path.
+Messages. Particle data travels as packed bytes (one row of bytes per
+particle, all fields side by side) through buffer-based calls: non-blocking
+sends and receives to both neighbours at once, the counts exchanged first
+(``refresh`` knows them from ``build_halo`` and skips that round), and one
+``Alltoallv`` when some particle has to jump more than one slab. Nothing is
+pickled on the per-step path.
 """
 
 import logging
@@ -53,7 +56,8 @@ log = logging.getLogger(__name__)
 # Coarse and fine bins of the two-level parallel histogram used by rebalance.
 _HISTOGRAM_BINS = 1024
 
-_TAG_COUNT_LEFT, _TAG_DATA_LEFT, _TAG_COUNT_RIGHT, _TAG_DATA_RIGHT = 701, 702, 703, 704
+# Message tags by the direction a message travels (towards lower or higher ranks).
+_TAG_COUNT_LEFTWARD, _TAG_COUNT_RIGHTWARD, _TAG_DATA_LEFTWARD, _TAG_DATA_RIGHTWARD = range(701, 705)
 
 
 # --- packing per-particle arrays into bytes ---------------------------------------------------
@@ -265,10 +269,7 @@ class SlabDecomposition:
         arrays = _field_arrays(particles)
         to_left = np.flatnonzero(owner == self.rank - 1)
         to_right = np.flatnonzero(owner == self.rank + 1)
-        from_right = self._exchange(pack(arrays, to_left), self.left, self.right,
-                                    _TAG_COUNT_LEFT, _TAG_DATA_LEFT)
-        from_left = self._exchange(pack(arrays, to_right), self.right, self.left,
-                                   _TAG_COUNT_RIGHT, _TAG_DATA_RIGHT)
+        from_left, from_right = self._exchange(pack(arrays, to_left), pack(arrays, to_right))
         kept = np.flatnonzero(stay)
         parts = [particles.select(kept)]
         for buffer in (from_left, from_right):
@@ -293,16 +294,32 @@ class SlabDecomposition:
             [received, (recv_bytes, _displacements(recv_bytes)), MPI.BYTE])
         return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
 
-    def _exchange(self, send, dest, source, count_tag, data_tag):
-        """Send packed rows to ``dest`` and receive packed rows from ``source``."""
-        count = np.array([len(send)], np.int64)
-        incoming = np.zeros(1, np.int64)
-        self.cart.Sendrecv(count, dest=dest, sendtag=count_tag,
-                           recvbuf=incoming, source=source, recvtag=count_tag)
-        received = np.empty((int(incoming[0]), send.shape[1]), np.uint8)
-        self.cart.Sendrecv([send, MPI.BYTE], dest=dest, sendtag=data_tag,
-                           recvbuf=[received, MPI.BYTE], source=source, recvtag=data_tag)
-        return received
+    def _exchange(self, to_left, to_right, counts=None):
+        """Send packed rows to both neighbours; returns the rows (from_left, from_right).
+
+        Non-blocking sends and receives, so both directions share one round of
+        latency. With ``counts`` (rows expected from the left and the right) the
+        count messages are skipped. Neighbours that are PROC_NULL send nothing.
+        """
+        cart = self.cart
+        if counts is None:
+            outgoing = [np.array([len(to_left)], np.int64), np.array([len(to_right)], np.int64)]
+            incoming = [np.zeros(1, np.int64), np.zeros(1, np.int64)]
+            MPI.Request.Waitall([
+                cart.Irecv(incoming[0], source=self.left, tag=_TAG_COUNT_RIGHTWARD),
+                cart.Irecv(incoming[1], source=self.right, tag=_TAG_COUNT_LEFTWARD),
+                cart.Isend(outgoing[0], dest=self.left, tag=_TAG_COUNT_LEFTWARD),
+                cart.Isend(outgoing[1], dest=self.right, tag=_TAG_COUNT_RIGHTWARD)])
+            counts = (int(incoming[0][0]), int(incoming[1][0]))
+        width = to_left.shape[1]
+        from_left = np.empty((counts[0], width), np.uint8)
+        from_right = np.empty((counts[1], width), np.uint8)
+        MPI.Request.Waitall([
+            cart.Irecv([from_left, MPI.BYTE], source=self.left, tag=_TAG_DATA_RIGHTWARD),
+            cart.Irecv([from_right, MPI.BYTE], source=self.right, tag=_TAG_DATA_LEFTWARD),
+            cart.Isend([to_left, MPI.BYTE], dest=self.left, tag=_TAG_DATA_LEFTWARD),
+            cart.Isend([to_right, MPI.BYTE], dest=self.right, tag=_TAG_DATA_RIGHTWARD)])
+        return from_left, from_right
 
     # -- halo -----------------------------------------------------------------------------------
 
@@ -336,10 +353,8 @@ class SlabDecomposition:
         self._send_right = (np.flatnonzero(hi - x < self.halo_width)
                             if self.right != MPI.PROC_NULL else np.empty(0, np.int64))
         arrays = _field_arrays(owned)
-        from_right = self._exchange(pack(arrays, self._send_left), self.left, self.right,
-                                    _TAG_COUNT_LEFT, _TAG_DATA_LEFT)
-        from_left = self._exchange(pack(arrays, self._send_right), self.right, self.left,
-                                   _TAG_COUNT_RIGHT, _TAG_DATA_RIGHT)
+        from_left, from_right = self._exchange(pack(arrays, self._send_left),
+                                               pack(arrays, self._send_right))
         self._n_owned = n
         self._n_from_left = len(from_left)
         self._n_from_right = len(from_right)
@@ -388,13 +403,10 @@ class SlabDecomposition:
                                  f"n_ghost = {self._n_owned} + {self.n_ghost} = {expected}")
         if self.size == 1 or not targets:
             return
-        from_right = self._exchange(pack(targets, self._send_left), self.left, self.right,
-                                    _TAG_COUNT_LEFT, _TAG_DATA_LEFT)
-        from_left = self._exchange(pack(targets, self._send_right), self.right, self.left,
-                                   _TAG_COUNT_RIGHT, _TAG_DATA_RIGHT)
-        if len(from_left) != self._n_from_left or len(from_right) != self._n_from_right:
-            raise RuntimeError("refresh: the neighbours sent a different number of ghosts "
-                               "than build_halo did (was build_halo called on every rank?)")
+        # The ghost counts are known since build_halo: one round of messages.
+        from_left, from_right = self._exchange(pack(targets, self._send_left),
+                                               pack(targets, self._send_right),
+                                               (self._n_from_left, self._n_from_right))
         unpack_into(from_left, targets, self._n_owned)
         unpack_into(from_right, targets, self._n_owned + self._n_from_left)
 
