@@ -184,6 +184,11 @@ SCHEMA = {
                                    doc="also surface if neighbour count < this times the "
                                        "full-lattice count (0 disables)"),
         "relaxation": Key("float", 0.2, gt=0.0, le=1.0, doc="gamma in the PPE source term"),
+        "source_term": Key("str", "density", choices=("density", "mixed"),
+                           doc="PPE source: number-density deviation, or the mixed "
+                               "divergence + density term (Tanaka & Masunaga 2010)"),
+        "mixed_relaxation": Key("float", 0.01, gt=0.0, le=1.0,
+                                doc="gamma of the density term in the mixed source"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True),
         "collision": Key("bool", True),

@@ -95,3 +95,13 @@ def gradient(pairs, w, field, n_rows, n0, reference, include):
     offset = pairs.offset[mask]
     return (DIMENSION / n0) * np.column_stack([
         np.bincount(rows, weights=factor * offset[:, k], minlength=n_rows) for k in range(2)])
+
+
+def divergence(pairs, w, field, n_rows, n0):
+    """<div u>_i = d/n0 sum_j (u_j - u_i) . r_ij w_ij / |r_ij|^2."""
+    mask = w > 0.0
+    rows = pairs.rows[mask]
+    difference = field[pairs.cols[mask]] - field[rows]
+    projected = np.einsum("pk,pk->p", difference, pairs.offset[mask])
+    return (DIMENSION / n0) * np.bincount(rows, weights=projected * w[mask] /
+                                          pairs.distance[mask] ** 2, minlength=n_rows)

@@ -116,9 +116,9 @@ def check_inside_domain(case, particles, origin, sources):
         first = int(np.flatnonzero(outside)[0])
         x, y = particles.position[first]
         raise CaseError(f"{sources[origin[first]]} puts {int(outside.sum())} particles outside "
-                        f"the domain, e.g. at ({x:.6g}, {y:.6g}); enlarge domain.lower/upper "
-                        f"to [{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, {upper[1]:g}] or "
-                        f"move the geometry")
+                        f"the domain [{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, {upper[1]:g}], "
+                        f"e.g. at ({x:.6g}, {y:.6g}) (walls and dummy layers included); "
+                        f"enlarge domain.lower/domain.upper or move the geometry")
 
 
 def check_overlaps(particles, origin, sources, spacing):

@@ -1,0 +1,169 @@
+"""Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--set S.K=V ...]
+[--check] [--debug] [PETSc options]`` (DESIGN.md §5).
+
+Exit status 0 done, 2 bad input (one line on stderr), 1 a run that failed.
+The case is read and validated on rank 0 and the verdict broadcast, so every
+rank stops together; an unexpected exception on any rank aborts the whole job.
+"""
+
+import argparse
+import json
+import logging
+import os
+import re
+import sys
+import traceback
+
+from parmps.errors import CaseError, RunFailure
+
+log = logging.getLogger("parmps")
+
+# PETSc options are single-dash words such as -pressure_ksp_rtol or -log_view.
+_PETSC_OPTION = re.compile(r"^-[A-Za-z][A-Za-z0-9]*_[A-Za-z0-9_]*$|^-(log_view|help_petsc)$")
+
+
+def split_petsc_options(argv):
+    """Separate PETSc options (and their values) from parmps's own arguments."""
+    ours, petsc = [], []
+    k = 0
+    while k < len(argv):
+        token = argv[k]
+        if _PETSC_OPTION.match(token):
+            petsc.append(token)
+            following = argv[k + 1] if k + 1 < len(argv) else None
+            if following is not None and (not following.startswith("-") or
+                                          _is_number(following)):
+                petsc.append(following)
+                k += 1
+        else:
+            ours.append(token)
+        k += 1
+    return ours, petsc
+
+
+def _is_number(text):
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise CaseError(f"command line: {message}")
+
+
+def build_parser():
+    parser = _Parser(prog="parmps", description="Parallel MPS fluid / mass-spring solid solver. "
+                     "PETSc options such as -pressure_ksp_rtol 1e-10 pass through to the "
+                     "pressure solver.")
+    parser.add_argument("case", help="the case file (TOML)")
+    parser.add_argument("-o", "--output", metavar="OUTDIR",
+                        help="output directory (default out/<case file stem>/)")
+    parser.add_argument("--end-time", type=float, metavar="T", help="override time.end")
+    parser.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
+                        help="override a case value (repeatable)")
+    parser.add_argument("--check", action="store_true",
+                        help="validate the case, print particle counts, n0, lambda0, the "
+                             "initial dt and a memory estimate, and exit")
+    parser.add_argument("--debug", action="store_true",
+                        help="show tracebacks and debug logging")
+    return parser
+
+
+def prepare_case(args):
+    """Read, override and validate the case; returns (case, case_text). Raises CaseError."""
+    from parmps import config
+    from parmps.tools import toml
+    try:
+        with open(args.case, "rb") as handle:
+            text = handle.read().decode("utf-8")
+    except FileNotFoundError:
+        raise CaseError(f"case file {args.case} not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CaseError(f"case file {args.case}: cannot read it ({exc})") from None
+    raw = config.load_text(text, args.case)
+    for assignment in args.set or []:
+        config.apply_override(raw, assignment)
+    if args.end_time is not None:
+        raw.setdefault("time", {})["end"] = args.end_time
+    try:
+        case = config.validate(raw)
+    except CaseError as exc:
+        raise CaseError(f"{args.case}: {exc}") from None
+    changed = bool(args.set) or args.end_time is not None
+    return case, toml.dumps(raw) if changed else text
+
+
+def _verdict(comm, action):
+    """Run ``action`` on rank 0 and share (result, error) with every rank."""
+    result, error = None, None
+    if comm.rank == 0:
+        try:
+            result = action()
+        except CaseError as exc:
+            error = str(exc)
+    result, error = comm.bcast((result, error), root=0)
+    if error is not None:
+        raise CaseError(error)
+    return result
+
+
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    ours, petsc_options = split_petsc_options(argv)
+    debug = "--debug" in ours
+    try:
+        args = build_parser().parse_args(ours)
+    except CaseError as exc:
+        print(f"parmps: error: {exc}", file=sys.stderr)
+        return exc.exit_status
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD
+    from parmps.tools.logging import configure
+    configure(comm, verbose=debug)
+    try:
+        return _run(args, petsc_options, comm)
+    except (CaseError, RunFailure) as exc:
+        if comm.rank == 0:
+            print(f"parmps: error: {exc}", file=sys.stderr)
+            if debug:
+                traceback.print_exc()
+        sys.stderr.flush()
+        return exc.exit_status
+    except Exception as exc:  # noqa: BLE001 - any bug must stop every rank
+        log.critical("rank %d failed: %s: %s", comm.rank, type(exc).__name__, exc)
+        traceback.print_exc()
+        sys.stderr.flush()
+        if comm.size > 1:
+            comm.Abort(1)
+        return 1
+
+
+def _run(args, petsc_options, comm):
+    case, case_text = _verdict(comm, lambda: prepare_case(args))
+    from parmps.simulation import Run
+    stem = os.path.splitext(os.path.basename(args.case))[0]
+    directory = args.output or os.path.join("out", stem)
+    if not args.check and petsc_options:
+        from parmps.pressure import initialise
+        initialise(petsc_options)
+    # Geometry is checked while building the scene, on every rank alike.
+    run = Run(case, case_text, comm, directory, end_time=None)
+    if args.check:
+        summary = run.summary()
+        if comm.rank == 0:
+            print(json.dumps(summary, indent=2))
+        return 0
+    if comm.rank == 0:
+        os.makedirs(directory, exist_ok=True)
+    comm.Barrier()
+    log.info("case %s: %s particles on %d rank(s), output in %s", args.case,
+             ", ".join(f"{v} {k}" for k, v in run.counts.items()), comm.size, directory)
+    path = run.execute()
+    log.info("output: %s and %s", path, os.path.join(directory, "result.xdmf"))
+    return 0

@@ -1,0 +1,182 @@
+"""The time loop: decomposition, fluid steps, checks, diagnostics, output, progress."""
+
+import logging
+import math
+import time as wallclock
+
+import numpy as np
+
+from parmps import scene
+from parmps.decomposition import SlabDecomposition
+from parmps.errors import RunFailure
+from parmps.fluid import FluidSolver, check_finite, max_speed
+from parmps.output import Output
+from parmps.particles import FLUID, KIND_NAMES
+
+log = logging.getLogger(__name__)
+
+PROGRESS_SECONDS = 5.0
+
+
+def choose_dt(case, speed, spacing, step):
+    """The step length: adaptive (CFL, viscous and dt_max limits) or the case's fixed dt."""
+    settings = case["time"]
+    nu = case["fluid"]["viscosity"]
+    courant_limit = settings["cfl"] * spacing / speed if speed > 0 else math.inf
+    if settings["fixed_dt"] > 0:
+        dt = settings["fixed_dt"]
+        if dt > courant_limit:
+            raise RunFailure(
+                f"step {step}: the fixed time.fixed_dt = {dt:g} s breaks the Courant limit: "
+                f"max fluid speed {speed:.4g} m/s needs dt <= {courant_limit:.4g} s "
+                f"(time.cfl = {settings['cfl']:g}); lower time.fixed_dt or set it to 0 "
+                f"for adaptive steps")
+        return dt
+    limits = [settings["dt_max"], courant_limit]
+    if nu > 0:
+        limits.append(settings["viscous_number"] * spacing ** 2 / nu)
+    return min(limits)
+
+
+class Run:
+    """A case set up on a communicator, ready to step."""
+
+    def __init__(self, case, case_text, comm, directory, end_time=None):
+        self.case = case
+        self.comm = comm
+        self.directory = directory
+        self.end_time = case["time"]["end"] if end_time is None else end_time
+        self.spacing = case["particles"]["spacing"]
+        self.decomposition = SlabDecomposition(comm, case)
+        global_scene, _, _ = scene.build(case)
+        self.counts = {KIND_NAMES[k]: int(np.count_nonzero(global_scene.kind == k))
+                       for k in KIND_NAMES if np.any(global_scene.kind == k)}
+        self.particles = self.decomposition.distribute(global_scene)
+        self.fluid = FluidSolver(case, comm, self.decomposition)
+        self.case_text = case_text
+        self.time = 0.0
+        self.step_number = 0
+
+    def summary(self):
+        """What --check prints: counts by kind, reference values, first dt, memory."""
+        fluid = self.fluid
+        total = sum(self.counts.values())
+        dt0 = choose_dt(self.case, max_speed(self.particles, self.comm), self.spacing, 0)
+        # Pair lists dominate memory: ~(pi re^2 / l0^2) neighbours, 8+8 bytes each,
+        # plus the pair geometry (3 doubles) and the matrix (12 bytes per entry).
+        neighbours = math.pi * (fluid.search_radius / self.spacing) ** 2
+        memory = total * (neighbours * (16 + 24 + 12) + 400)
+        return {
+            "particles": dict(self.counts, total=total),
+            "n0": fluid.n0, "n0_laplacian": fluid.n0_laplacian, "lambda0": fluid.lambda0,
+            "initial_dt": dt0, "memory_estimate_mb": memory / 2 ** 20,
+            "ranks": self.comm.size,
+        }
+
+    def execute(self):
+        from parmps.pressure import PressureSolver
+        comm = self.comm
+        case = self.case
+        self.fluid.pressure_solver = PressureSolver(comm, case["pressure"])
+        log.info("pressure solver: %s", self.fluid.pressure_solver.describe())
+        output = Output(comm, self.directory, self.case_text)
+        complete = False
+        try:
+            self._loop(output)
+            complete = True
+        finally:
+            output.close(complete)
+            self.fluid.pressure_solver.destroy()
+        return output.path
+
+    def _loop(self, output):
+        comm = self.comm
+        case = self.case
+        interval = case["time"]["output_interval"]
+        max_steps = case["time"]["max_steps"]
+        write_frames = case["output"]["frames"]
+        start = wallclock.perf_counter()
+        last_progress = start
+        next_frame = interval
+        if write_frames:
+            output.write_frame(0, 0.0, 0.0, self.particles)
+        total_particles = comm.allreduce(self.particles.n_owned)
+        particle_steps = 0
+        timers = self.fluid.timers
+        while self.time < self.end_time * (1 - 1e-12) and (max_steps == 0 or
+                                                           self.step_number < max_steps):
+            step = self.step_number + 1
+            speed = max_speed(self.particles, comm)
+            dt = choose_dt(case, speed, self.spacing, step)
+            if self.time + dt > self.end_time:
+                dt = self.end_time - self.time
+            timers.start("halo")
+            particles = self.decomposition.migrate(self.particles)
+            particles = self.decomposition.rebalance(particles, step)
+            particles = self.decomposition.build_halo(particles)
+            timers.stop()
+            stats = self.fluid.step(particles, dt, step)
+            self.particles = particles
+            self.time += dt
+            self.step_number = step
+            self._check(particles, dt, step)
+            particle_steps += total_particles
+            n = particles.n_owned
+            fluid = particles.kind[:n] == FLUID
+            speed_after = max_speed(particles, comm)
+            kinetic = comm.allreduce(0.5 * case["fluid"]["density"] * self.spacing ** 2 *
+                                     float((particles.velocity[:n][fluid] ** 2).sum()))
+            n_fluid = comm.allreduce(int(np.count_nonzero(fluid)))
+            now = wallclock.perf_counter()
+            output.add_diagnostics({
+                "step": step, "time": self.time, "dt": dt,
+                "ksp_iterations": stats["ksp_iterations"], "ksp_residual": stats["ksp_residual"],
+                "max_speed": speed_after, "kinetic_energy": kinetic, "n_fluid": n_fluid,
+                "wall_seconds": now - start})
+            frame_due = self.time >= next_frame * (1 - 1e-9) or self.time >= self.end_time * (1 - 1e-12)
+            if frame_due:
+                timers.start("output")
+                if write_frames:
+                    output.write_frame(step, self.time, dt, particles)
+                else:
+                    output.flush_diagnostics()
+                timers.stop()
+                while next_frame <= self.time * (1 + 1e-9):
+                    next_frame += interval
+            if now - last_progress >= PROGRESS_SECONDS:
+                last_progress = now
+                elapsed = now - start
+                rate = particle_steps / elapsed
+                left = elapsed / self.time * (self.end_time - self.time) if self.time > 0 else 0
+                log.info("step %d  t = %.4g s  dt = %.3g s  ksp %d its  %.3g particle-steps/s  "
+                         "%.0f s left", step, self.time, dt, stats["ksp_iterations"], rate, left)
+        elapsed = wallclock.perf_counter() - start
+        self.elapsed = elapsed
+        self.particle_steps = particle_steps
+        log.info("done: %d steps to t = %.4g s in %.1f s (%.3g particle-steps/s, %.2f us per "
+                 "particle-step)", self.step_number, self.time, elapsed,
+                 particle_steps / max(elapsed, 1e-12),
+                 1e6 * elapsed / max(particle_steps, 1))
+
+    def _check(self, particles, dt, step):
+        """Stop loudly on NaN, a particle leaving the domain, or a Courant breach."""
+        comm = self.comm
+        check_finite(particles, comm, step)
+        n = particles.n_owned
+        lower = np.asarray(self.case["domain"]["lower"])
+        upper = np.asarray(self.case["domain"]["upper"])
+        position = particles.position[:n]
+        outside = np.any((position < lower) | (position > upper), axis=1)
+        local = (int(particles.id[:n][outside][0]),) + tuple(position[outside][0]) \
+            if np.any(outside) else None
+        escaped = [item for item in comm.allgather(local) if item is not None]
+        if escaped:
+            pid, x, y = min(escaped)
+            raise RunFailure(f"step {step}: particle {pid} left the domain at ({x:.4g}, {y:.4g}) "
+                             f"(through a wall, or the domain is too small)")
+        speed = max_speed(particles, comm)
+        courant = speed * dt / self.spacing
+        if courant > 1.0:
+            raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
+                             f"{speed:.4g} m/s, dt {dt:.3g} s): particles jump more than a "
+                             f"spacing per step; the run is unstable")
