@@ -146,7 +146,11 @@ def main(argv=None):
 
 def _run(args, petsc_options, comm):
     case, case_text = _verdict(comm, lambda: prepare_case(args))
-    from parmps.simulation import Run
+    from parmps.solid_run import SolidRun, is_solid_only
+    if is_solid_only(case):
+        Run = SolidRun  # mass-spring bodies alone: no scene, no fluid, no PETSc
+    else:
+        from parmps.simulation import Run
     stem = os.path.splitext(os.path.basename(args.case))[0]
     directory = args.output or os.path.join("out", stem)
     if not args.check and petsc_options:
