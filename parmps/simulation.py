@@ -73,7 +73,8 @@ class Run:
             "ranks": self.comm.size,
         }
 
-    def execute(self):
+    def execute(self, on_step=None):
+        """Run to the end time; ``on_step(run)`` is called after every step (benchmarks)."""
         from parmps.pressure import PressureSolver
         comm = self.comm
         case = self.case
@@ -82,14 +83,14 @@ class Run:
         output = Output(comm, self.directory, self.case_text)
         complete = False
         try:
-            self._loop(output)
+            self._loop(output, on_step)
             complete = True
         finally:
             output.close(complete)
             self.fluid.pressure_solver.destroy()
         return output.path
 
-    def _loop(self, output):
+    def _loop(self, output, on_step):
         comm = self.comm
         case = self.case
         interval = case["time"]["output_interval"]
@@ -120,6 +121,8 @@ class Run:
             self.time += dt
             self.step_number = step
             self._check(particles, dt, step)
+            if on_step is not None:
+                on_step(self)
             particle_steps += total_particles
             n = particles.n_owned
             fluid = particles.kind[:n] == FLUID

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from parmps.tools.parallel import launch_environment, run_mpirun
+
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
 
@@ -20,33 +22,25 @@ def mpi_environment():
     return env
 
 
-def mpirun_prefix(ranks):
-    if ranks <= 1:
-        return [sys.executable]
-    prefix = ["mpirun", "-n", str(ranks)]
-    if ranks > (os.cpu_count() or 1):
-        prefix.append("--oversubscribe")
-    return prefix + [sys.executable]
-
-
 def run_parmps(args, ranks=1, timeout=300, cwd=None):
     """Run ``python -m parmps ARGS`` (under mpirun when ranks > 1); a hang fails the test."""
-    command = mpirun_prefix(ranks) + ["-m", "parmps"] + [str(a) for a in args]
-    try:
-        return subprocess.run(command, capture_output=True, text=True, timeout=timeout,
-                              env=mpi_environment(), cwd=cwd or ROOT)
-    except subprocess.TimeoutExpired as exc:
-        pytest.fail(f"timed out after {timeout} s: {' '.join(command)}\n{exc.stderr}")
+    return run_python(["-m", "parmps"] + list(args), ranks=ranks, timeout=timeout, cwd=cwd)
 
 
 def run_python(args, ranks=1, timeout=300, cwd=None):
-    """Run ``python ARGS`` (under mpirun when ranks > 1) with a timeout."""
-    command = mpirun_prefix(ranks) + [str(a) for a in args]
+    """Run ``python ARGS`` (under mpirun when ranks > 1) with a timeout.
+
+    Under mpirun the whole process group is killed on timeout, ranks included.
+    """
+    args = [str(a) for a in args]
     try:
-        return subprocess.run(command, capture_output=True, text=True, timeout=timeout,
-                              env=mpi_environment(), cwd=cwd or ROOT)
+        if ranks > 1:
+            return run_mpirun(ranks, [sys.executable] + args, timeout, cwd=cwd or ROOT,
+                              env=launch_environment(mpi_environment()))
+        return subprocess.run([sys.executable] + args, capture_output=True, text=True,
+                              timeout=timeout, env=mpi_environment(), cwd=cwd or ROOT)
     except subprocess.TimeoutExpired as exc:
-        pytest.fail(f"timed out after {timeout} s: {' '.join(command)}\n{exc.stderr}")
+        pytest.fail(f"timed out after {timeout} s: {' '.join(args)}\n{exc.stderr}")
 
 
 def error_lines(stderr):

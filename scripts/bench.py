@@ -1,0 +1,131 @@
+#!/usr/bin/env python3
+"""Benchmark: the dam break at several sizes and rank counts, one JSON line per run.
+
+    scripts/bench.py [--particles N ...] [--ranks R ...] [--steps S] [--warmup W]
+
+Each run builds cases/dam_break.toml at the spacing that gives about N particles
+(fluid, walls and dummies), takes W warm-up steps (numba compilation, first
+AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
+us_per_particle_step and a breakdown of seconds by part (the slowest rank's).
+Runs with more ranks than cores oversubscribe, which the line records.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CASE = os.path.join(ROOT, "cases", "dam_break.toml")
+
+
+def spacing_for(target):
+    """The l0 = a/m (a = 0.2 m) whose dam-break scene holds closest to ``target`` particles."""
+    from parmps import config, scene
+    best = None
+    for m in range(10, 400):
+        spacing = 0.2 / m
+        fluid = 2 * m * m
+        if fluid > 2 * target:
+            break
+        if fluid < target / 4:
+            continue
+        case = _case(spacing)
+        total = len(scene.build(case)[0])
+        if best is None or abs(total - target) < abs(best[1] - target):
+            best = (spacing, total)
+    return best
+
+
+def _case(spacing, steps=0):
+    from parmps import config
+    with open(CASE, "rb") as handle:
+        raw = config.load_text(handle.read().decode())
+    raw["particles"]["spacing"] = spacing
+    raw["time"]["max_steps"] = steps
+    raw.setdefault("output", {})["frames"] = False
+    return config.validate(raw)
+
+
+def worker(args):
+    """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
+    import time
+
+    from mpi4py import MPI
+
+    from parmps.simulation import Run
+    comm = MPI.COMM_WORLD
+    spacing = args.spacing
+    case = _case(spacing, steps=args.warmup + args.steps)
+    directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
+    run = Run(case, "", comm, directory)
+    marks = {}
+
+    def on_step(current):
+        if current.step_number == args.warmup:
+            comm.Barrier()
+            marks["start"] = time.perf_counter()
+            marks["fluid"] = dict(current.fluid.timers.seconds)
+            marks["halo"] = current.decomposition.halo_seconds
+            marks["migration"] = current.decomposition.migration_seconds
+
+    run.execute(on_step=on_step)
+    comm.Barrier()
+    seconds = time.perf_counter() - marks["start"]
+    timers = run.fluid.timers.seconds
+    breakdown = {part: timers[part] - marks["fluid"][part]
+                 for part in ("neighbours", "operators", "assembly", "solve", "output")}
+    breakdown["halo"] = run.decomposition.halo_seconds - marks["halo"]
+    breakdown["migration"] = run.decomposition.migration_seconds - marks["migration"]
+    breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
+    particles = comm.allreduce(run.particles.n_owned)
+    if comm.rank == 0:
+        line = {
+            "particles": particles, "ranks": comm.size, "steps": args.steps,
+            "seconds": round(seconds, 4),
+            "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
+            "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
+            "spacing": spacing,
+            "oversubscribed": comm.size > (os.cpu_count() or 1),
+        }
+        print(json.dumps(line), flush=True)
+        import shutil
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--particles", type=int, nargs="+", default=[2500, 10000, 40000])
+    parser.add_argument("--ranks", type=int, nargs="+", default=[1])
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--spacing", type=float, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker:
+        worker(args)
+        return 0
+    from parmps.tools.parallel import launch_environment, mpirun_command
+    status = 0
+    for target in args.particles:
+        spacing, _ = spacing_for(target)
+        for ranks in args.ranks:
+            argv = [sys.executable, os.path.abspath(__file__), "--worker", "--spacing",
+                    repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup)]
+            command = mpirun_command(ranks, argv) if ranks > 1 else argv
+            result = subprocess.run(command, capture_output=True, text=True,
+                                    env=launch_environment(), cwd=ROOT)
+            lines = [line for line in result.stdout.splitlines() if line.startswith("{")]
+            if result.returncode != 0 or not lines:
+                print(json.dumps({"particles": target, "ranks": ranks,
+                                  "error": result.stderr.strip().splitlines()[-3:]}), flush=True)
+                status = 1
+                continue
+            print(lines[-1], flush=True)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

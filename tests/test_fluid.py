@@ -1,0 +1,134 @@
+"""The fluid solver end to end: --check, hydrostatic pressure, output layout, PETSc options,
+solver failure and Courant breaches (exit status 1 with the last good output kept)."""
+
+import json
+import xml.etree.ElementTree as ElementTree
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import CASES, error_lines, run_parmps
+from parmps import analysis
+from parmps.output import DIAGNOSTICS, FRAME_FIELDS
+
+# The dam break at a coarse resolution the test budget allows (a = 0.2 m, l0 = a/20).
+COARSE_DAM_BREAK = ["--set", "particles.spacing=0.01"]
+
+
+def test_check_prints_counts_reference_values_dt_and_memory(tmp_path):
+    result = run_parmps([CASES / "dam_break.toml", "--check", "-o", tmp_path / "out"], timeout=60)
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["particles"]["fluid"] == 40 * 80
+    assert summary["particles"]["total"] == sum(v for k, v in summary["particles"].items()
+                                                if k != "total")
+    assert summary["n0"] == pytest.approx(6.5397, rel=1e-4)
+    assert summary["lambda0"] > 0 and summary["initial_dt"] == pytest.approx(1e-3)
+    assert summary["memory_estimate_mb"] > 0
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture(scope="module")
+def hydrostatic_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("hydrostatic")
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", out, "--end-time", "1.0"],
+                        timeout=300)
+    assert result.returncode == 0, result.stderr
+    return out, result
+
+
+def test_hydrostatic_pressure_within_two_percent(hydrostatic_run):
+    out, _ = hydrostatic_run
+    bottom, rms = analysis.hydrostatic_error(out / "result.h5", depth=0.2, density=1000.0,
+                                             gravity=9.81, settle_time=0.3, spacing=0.01)
+    assert abs(bottom) < 0.02, bottom
+    assert rms < 0.02, rms
+    # The tank's inner walls are at x = 0 and 0.2, its floor at y = 0.
+    assert analysis.escaped(out / "result.h5", [0.0, 0.0], [0.2, 0.36]) == 0
+
+
+def test_output_layout_and_xdmf(hydrostatic_run):
+    out, result = hydrostatic_run
+    assert "output: " in result.stderr
+    with h5py.File(out / "result.h5", "r") as handle:
+        assert handle.attrs["complete"]
+        case = handle["case"].attrs
+        assert "[[fluid_block]]" in case["toml"] and case["ranks"] == 1
+        assert case["parmps_version"]
+        frames = sorted(handle["frames"])
+        assert frames[0] == "00000000" and len(frames) == 51
+        last = handle["frames"][frames[-1]]
+        assert last.attrs["time"] == pytest.approx(1.0)
+        for name in FRAME_FIELDS:
+            assert len(last[name]) == 752
+        assert last["id"].dtype == np.int64 and last["kind"].dtype == np.int8
+        assert last["position"].shape == (752, 2)
+        steps = handle["diagnostics"]["step"][()]
+        np.testing.assert_array_equal(steps, np.arange(1, len(steps) + 1))
+        assert steps[-1] == last.attrs["step"]
+        for name in DIAGNOSTICS:
+            assert len(handle["diagnostics"][name]) == len(steps)
+        assert np.all(handle["diagnostics"]["ksp_iterations"][()] > 0)
+        assert np.all(handle["diagnostics"]["n_fluid"][()] == 400)
+    root = ElementTree.parse(out / "result.xdmf").getroot()
+    grids = root.findall(".//Grid[@GridType='Uniform']")
+    assert len(grids) == len(frames)
+    with h5py.File(out / "result.h5", "r") as handle:
+        for item in root.iter("DataItem"):
+            file_name, dataset = item.text.split(":")
+            assert file_name == "result.h5"
+            dims = tuple(int(d) for d in item.get("Dimensions").split())
+            assert handle[dataset].shape == dims
+
+
+def test_petsc_options_reach_the_solver_and_divergence_exits_1(tmp_path):
+    # One CG iteration cannot reach rtol 1e-14: the KSP reports DIVERGED_MAX_IT.
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
+                         "-pressure_ksp_max_it", "1", "-pressure_ksp_rtol", "1e-14"], timeout=120)
+    assert result.returncode == 1, result.stderr
+    (line,) = error_lines(result.stderr)
+    assert "pressure solve diverged at step 1" in line and "DIVERGED_MAX_IT" in line
+    with h5py.File(tmp_path / "result.h5", "r") as handle:
+        assert not handle.attrs["complete"]
+        assert "00000000" in handle["frames"]
+
+
+def test_case_options_apply_and_command_line_wins(tmp_path):
+    failing = ["--set", "pressure.options={ksp_max_it = 1, ksp_rtol = 1e-14}"]
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path / "a", "--end-time", "0.003"]
+                        + failing, timeout=120)
+    assert result.returncode == 1 and "DIVERGED_MAX_IT" in result.stderr
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path / "b", "--end-time", "0.003",
+                         "-pressure_ksp_max_it", "500"] + failing, timeout=120)
+    assert result.returncode == 0, result.stderr
+
+
+def test_fixed_dt_beyond_courant_stops_with_message_and_keeps_output(tmp_path):
+    result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--set", "time.fixed_dt=0.004",
+                         "--set", "time.output_interval=0.02"] + COARSE_DAM_BREAK, timeout=120)
+    assert result.returncode == 1, result.stderr
+    (line,) = error_lines(result.stderr)
+    assert "breaks the Courant limit" in line and "time.fixed_dt" in line
+    step = int(line.split("step ")[1].split(":")[0])
+    with h5py.File(tmp_path / "result.h5", "r") as handle:
+        assert not handle.attrs["complete"]
+        frames = sorted(handle["frames"])
+        assert len(frames) >= 2
+        assert all(int(name) < step for name in frames)
+        assert np.all(np.isfinite(handle["frames"][frames[-1]]["position"][()]))
+
+
+def test_dam_break_front_against_martin_moyce(tmp_path):
+    # T = 3.11 is reached at t = 3.11 / sqrt(2 g / a) = 0.314 s for a = 0.2 m.
+    result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--end-time", "0.33",
+                         "--set", "time.output_interval=0.01"] + COARSE_DAM_BREAK, timeout=600)
+    assert result.returncode == 0, result.stderr
+    rms, *_ = analysis.dam_break_error(tmp_path / "result.h5", column_width=0.2, wall_x=0.0,
+                                       spacing=0.01)
+    assert rms < DAM_BREAK_TOLERANCE, rms
+
+
+# Measured 0.13 at l0 = a/20 and 0.14 at a/40 (see README): the simulated front
+# leads the experiment early on, where the gate was still being lifted.
+DAM_BREAK_TOLERANCE = 0.15
