@@ -86,7 +86,8 @@ class PressureSolver:
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
         x.getArray()[:] = guess
-        if matrix.getSizes() != self.sizes:
+        # Collective: every rank must rebuild the KSP together, or PETSc hangs.
+        if self.comm.allreduce(int(matrix.getSizes() != self.sizes)) > 0:
             # The set of unknowns changes as particles reach or leave the free
             # surface; a preconditioner (GAMG) cannot change size, so start afresh.
             self.ksp.destroy()
