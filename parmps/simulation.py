@@ -80,7 +80,8 @@ class Run:
         case = self.case
         self.fluid.pressure_solver = PressureSolver(comm, case["pressure"])
         log.info("pressure solver: %s", self.fluid.pressure_solver.describe())
-        output = Output(comm, self.directory, self.case_text)
+        # imbalance: largest rank's owned particle count over the mean, for each step.
+        output = Output(comm, self.directory, self.case_text, extra_diagnostics=("imbalance",))
         complete = False
         try:
             self._loop(output, on_step)
@@ -135,7 +136,8 @@ class Run:
                 "step": step, "time": self.time, "dt": dt,
                 "ksp_iterations": stats["ksp_iterations"], "ksp_residual": stats["ksp_residual"],
                 "max_speed": speed_after, "kinetic_energy": kinetic, "n_fluid": n_fluid,
-                "wall_seconds": now - start})
+                "wall_seconds": now - start,
+                "imbalance": self.decomposition.imbalance(particles)})
             frame_due = self.time >= next_frame * (1 - 1e-9) or self.time >= self.end_time * (1 - 1e-12)
             if frame_due:
                 timers.start("output")
