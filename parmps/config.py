@@ -207,6 +207,9 @@ SCHEMA = {
     "pressure": Section({
         "rtol": Key("float", 1.0e-8, gt=0.0, lt=1.0),
         "max_iterations": Key("int", 1000, gt=0),
+        "reuse_preconditioner": Key("int", 4, ge=0,
+                                    doc="steps a preconditioner set-up is reused for "
+                                        "(0: set up every step)"),
         "ksp_type": Key("str", "cg"),
         "pc_type": Key("str", "gamg"),
         "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),
@@ -264,6 +267,13 @@ SCHEMA = {
         "pinned": Key("str", "none", choices=("none", "top", "bottom", "left", "right", "all"),
                       doc="a side whose nodes never move"),
         "pinned_ids": Key("ints", [], ge=0, doc="more nodes that never move"),
+        "anchors": Key("points", [], doc="fixed points (e.g. on a rigid wall) that close the "
+                                         "boundary polygon: the area kept is the one between "
+                                         "the body and them; they are not particles"),
+        "anchor_row": Key("str", "bottom", choices=("bottom", "top"),
+                          doc="lattice with anchors: the loop runs through the anchors (in "
+                              "order) and then this row (bottom: right to left; top: left "
+                              "to right)"),
         "load": Key("tables", [], keys={
             "nodes": Key("str", choices=("top", "bottom", "left", "right", "all", "row",
                                          "column", "ids")),
@@ -275,6 +285,17 @@ SCHEMA = {
             "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
         }, doc="[[body.load]]: a force on a node set over a time window"),
     }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
+    "inlet": Section({
+        "lower": Key("vec2", doc="lower-left corner of the buffer zone"),
+        "upper": Key("vec2", doc="upper-right corner of the buffer zone"),
+        "velocity": Key("vec2", doc="uniform inflow velocity U0, along x or y [m/s]"),
+    }, many=True, doc="an inflow buffer zone: lattice columns of inflow particles moving at "
+                      "U0; new columns enter at its upstream face, particles leaving its "
+                      "downstream face become fluid"),
+    "outlet": Section({
+        "side": Key("str", choices=("left", "right", "bottom", "top"),
+                    doc="the domain side through which fluid leaves and is removed"),
+    }, many=True, doc="an open side of the domain: fluid crossing it is removed"),
     "output": Section({
         "frames": Key("bool", True, doc="write particle frames (diagnostics are always written)"),
     }),
@@ -329,7 +350,7 @@ def _check_consistency(case):
         if not upper[axis] > lower[axis]:
             raise CaseError(f"domain.upper.{label} ({upper[axis]}) must exceed "
                             f"domain.lower.{label} ({lower[axis]})")
-    for kind in ("fluid_block", "tank", "wall_box"):
+    for kind in ("fluid_block", "tank", "wall_box", "inlet"):
         for k, item in enumerate(case[kind]):
             for axis, label in enumerate("xy"):
                 if not item["upper"][axis] > item["lower"][axis]:

@@ -12,11 +12,10 @@ import time
 
 import numpy as np
 
-from parmps import operators
+from parmps import kernels, operators
 from parmps.errors import RunFailure
-from parmps.neighbours import pair_list, rows_of
+from parmps.neighbours import pair_list
 from parmps.particles import DUMMY, FLUID, INFLOW
-from parmps.pressure import assemble
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +54,7 @@ class FluidSolver:
         self.search_radius = self.re_laplacian + case["parallel"]["halo_skin"] * spacing
         self.n0, _ = operators.reference_values(spacing, self.re_number_density)
         self.n0_laplacian, self.lambda0 = operators.reference_values(spacing, self.re_laplacian)
+        self.laplacian_coefficient = 2.0 * operators.DIMENSION / (self.lambda0 * self.n0_laplacian)
         self.neighbour_count0 = operators.neighbour_count_reference(spacing,
                                                                     self.re_number_density)
         self.density = case["fluid"]["density"]
@@ -92,20 +92,15 @@ class FluidSolver:
 
         timers.start("neighbours")
         indptr, cols = pair_list(position, self.search_radius, n_rows=n)
-        rows = rows_of(indptr)
 
         timers.start("operators")
-        pairs = operators.PairGeometry(indptr, rows, cols, position)
-        w_laplacian = pairs.weight(self.re_laplacian)
-        if self.source_term == "mixed":
-            current_density = operators.number_density(
-                pairs, pairs.weight(self.re_number_density), n)
         velocity_star = velocity.copy()
         position_star = position.copy()
         acceleration = np.broadcast_to(self.gravity, (n, 2)).copy()
         if self.viscosity > 0.0:
-            acceleration += self.viscosity * operators.laplacian(
-                pairs, w_laplacian, velocity, n, self.n0_laplacian, self.lambda0)
+            acceleration += (self.viscosity * self.laplacian_coefficient) * \
+                kernels.vector_laplacian_sum(indptr, cols, position, velocity,
+                                             self.re_laplacian, n)
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
@@ -113,63 +108,70 @@ class FluidSolver:
 
         if self.collision:
             timers.start("operators")
-            self._collide(pairs, rows, cols, kind, position_star, velocity_star, n, dt)
+            change = kernels.collision_change(indptr, cols, position_star, velocity_star,
+                                              self.moving(kind), self.collision_distance,
+                                              self.restitution, n)
+            velocity_star[:n] += change
+            position_star[:n] += dt * change
             timers.start("halo")
             decomposition.refresh([position_star, velocity_star])
 
         timers.start("operators")
-        pairs = operators.PairGeometry(indptr, rows, cols, position_star)
-        w_number_density = pairs.weight(self.re_number_density)
-        w_laplacian = pairs.weight(self.re_laplacian)
-        number_density = operators.number_density(pairs, w_number_density, n)
+        number_density, neighbour_count = kernels.number_density(
+            indptr, cols, position_star, self.re_number_density, n)
         surface = number_density < self.surface_threshold * self.n0
         if self.neighbour_threshold > 0.0:
-            count = np.bincount(rows, weights=(w_number_density > 0).astype(float), minlength=n)
-            surface |= count < self.neighbour_threshold * self.neighbour_count0
-        unknown = (kind[:n] != DUMMY) & ~surface
-        n_unknown = int(np.count_nonzero(unknown))
-        first_row = self.comm.exscan(n_unknown) or 0
-        global_row = np.full(len(particles), -1, np.int64)
-        global_row[np.flatnonzero(unknown)] = first_row + np.arange(n_unknown)
+            surface |= neighbour_count < self.neighbour_threshold * self.neighbour_count0
+        has_pressure = kind != DUMMY
+        unknown = has_pressure[:n] & ~surface
+        pressure_index = np.flatnonzero(has_pressure[:n])
+        first_row = self.comm.exscan(len(pressure_index)) or 0
+        row_number = np.full(len(particles), -1, np.int64)
+        row_number[pressure_index] = first_row + np.arange(len(pressure_index))
+        is_unknown = np.zeros(len(particles), np.int8)
+        is_unknown[:n] = unknown
         timers.start("halo")
-        decomposition.refresh([global_row])
+        decomposition.refresh([row_number, is_unknown])
 
         timers.start("assembly")
-        is_dummy = kind == DUMMY
-        csr_indptr, columns, values, rhs = assemble(
-            rows, cols, w_laplacian, unknown, global_row, is_dummy, number_density,
-            self.n0, 2.0 * operators.DIMENSION / (self.lambda0 * self.n0_laplacian),
-            self.density, dt, self.relaxation, self.compressibility)
+        csr_indptr, columns, values = kernels.poisson_rows(
+            indptr, cols, position_star, self.re_laplacian, row_number, is_unknown,
+            self.laplacian_coefficient, self.density * self.compressibility / dt ** 2,
+            self.laplacian_coefficient * self.n0_laplacian)
+        rhs = np.zeros(len(pressure_index))
+        in_rows = unknown[pressure_index]
+        unknown_index = pressure_index[in_rows]
         if self.source_term == "mixed":
             # Tanaka & Masunaga: rho/dt div u* plus a weak density term at the
             # start-of-step positions; far less pressure noise than n* alone.
-            unknown_index = np.flatnonzero(unknown)
-            divergence = operators.divergence(pairs, w_number_density, velocity_star, n,
-                                              self.n0)
-            rhs = (-(self.density / dt) * divergence[unknown_index]
-                   + self.mixed_relaxation * (self.density / dt ** 2)
-                   * (current_density[unknown_index] - self.n0) / self.n0)
+            current_density, _ = kernels.number_density(indptr, cols, position,
+                                                        self.re_number_density, n)
+            divergence = (operators.DIMENSION / self.n0) * kernels.divergence_sum(
+                indptr, cols, position_star, velocity_star, self.re_number_density, n)
+            rhs[in_rows] = (-(self.density / dt) * divergence[unknown_index]
+                            + self.mixed_relaxation * (self.density / dt ** 2)
+                            * (current_density[unknown_index] - self.n0) / self.n0)
+        else:
+            rhs[in_rows] = (self.density / dt ** 2) * self.relaxation * \
+                (number_density[unknown_index] - self.n0) / self.n0
 
         timers.start("solve")
-        guess = particles.pressure[:n][unknown]
+        guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)
         solution, iterations, residual = self.pressure_solver.solve(
             csr_indptr, columns, values, rhs, guess, step_number)
         self.last_iterations, self.last_residual = iterations, residual
 
         timers.start("operators")
         pressure = np.zeros(len(particles))
-        pressure[np.flatnonzero(unknown)] = solution
+        pressure[pressure_index] = np.where(in_rows, solution, 0.0)
         if self.clamp:
             np.maximum(pressure, 0.0, out=pressure)
         timers.start("halo")
         decomposition.refresh([pressure])
 
         timers.start("operators")
-        has_pressure = ~is_dummy
-        minimum = operators.neighbourhood_minimum(pairs, w_number_density, pressure, n,
-                                                  has_pressure)
-        pressure_gradient = operators.gradient(pairs, w_number_density, pressure, n, self.n0,
-                                               minimum, has_pressure)
+        pressure_gradient = (operators.DIMENSION / self.n0) * kernels.pressure_gradient_sum(
+            indptr, cols, position_star, pressure, has_pressure, self.re_number_density, n)
         correction = pressure_gradient[moving] / self.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction
@@ -181,35 +183,6 @@ class FluidSolver:
         timers.stop()
         return {"ksp_iterations": iterations, "ksp_residual": residual,
                 "n_surface": int(np.count_nonzero(surface & moving))}
-
-    def _collide(self, pairs, rows, cols, kind, position, velocity, n, dt):
-        """Pairwise collisions of particles closer than collision_distance (Jacobi-style).
-
-        Two approaching fluid particles exchange the normal component of their
-        relative velocity with restitution e; a fixed particle (wall, dummy,
-        solid node) reflects a fluid particle as an infinitely heavy partner.
-        All impulses use the pre-collision velocities, so the result does not
-        depend on the order of pairs (nor on the rank count).
-        """
-        moving_all = self.moving(kind)
-        offset = position[cols] - position[rows]
-        distance = np.sqrt(np.einsum("pk,pk->p", offset, offset))
-        close = (distance < self.collision_distance) & (distance > 0) & moving_all[rows]
-        if not np.any(close):
-            return
-        rows_c, cols_c = rows[close], cols[close]
-        normal = offset[close] / distance[close, None]
-        approach = np.einsum("pk,pk->p", velocity[rows_c] - velocity[cols_c], normal)
-        hit = approach > 0.0
-        if not np.any(hit):
-            return
-        rows_c, cols_c, normal, approach = rows_c[hit], cols_c[hit], normal[hit], approach[hit]
-        share = np.where(moving_all[cols_c], 0.5, 1.0)
-        impulse = (1.0 + self.restitution) * share * approach
-        change = np.column_stack([
-            np.bincount(rows_c, weights=-impulse * normal[:, k], minlength=n) for k in range(2)])
-        velocity[:n] += change
-        position[:n] += dt * change
 
 
 def max_speed(particles, comm):

@@ -51,6 +51,11 @@ class PressureSolver:
         self.ksp = self._make_ksp()
         self.sizes = None
         self.solves = 0
+        self.reuse_limit = settings["reuse_preconditioner"]
+        self.preconditioner_age = 0
+        self.fresh_iterations = None
+        self.last_iterations = 0
+        self.setups = 0
 
     def _make_ksp(self):
         settings = self.settings
@@ -88,17 +93,32 @@ class PressureSolver:
         x.getArray()[:] = guess
         # Collective: every rank must rebuild the KSP together, or PETSc hangs.
         if self.comm.allreduce(int(matrix.getSizes() != self.sizes)) > 0:
-            # The set of unknowns changes as particles reach or leave the free
-            # surface; a preconditioner (GAMG) cannot change size, so start afresh.
+            # Migration changed this rank's rows; a preconditioner (GAMG) cannot
+            # change size, so start afresh.
             self.ksp.destroy()
             self.ksp = self._make_ksp()
             self.sizes = matrix.getSizes()
+            self.fresh_iterations = None
+        # The AMG hierarchy of a recent matrix preconditions this one well while
+        # particles move little; set it up again every few steps, or sooner when
+        # CG needs clearly more iterations than right after a set-up.
+        reuse = (self.fresh_iterations is not None
+                 and self.preconditioner_age < self.reuse_limit
+                 and self.last_iterations <= 1.5 * self.fresh_iterations + 2)
+        self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(matrix)
         self.ksp.solve(b, x)
         reason = self.ksp.getConvergedReason()
         iterations = self.ksp.getIterationNumber()
         residual = self.ksp.getResidualNorm()
         solution = x.getArray().copy()
+        self.last_iterations = iterations
+        if reuse:
+            self.preconditioner_age += 1
+        else:
+            self.preconditioner_age = 0
+            self.fresh_iterations = iterations
+            self.setups += 1
         for item in (matrix, b, x):
             item.destroy()
         self.solves += 1
@@ -116,48 +136,3 @@ def _reason_name(PETSc, reason):
         if not name.startswith("_") and getattr(PETSc.KSP.ConvergedReason, name) == reason:
             return f"{name} ({reason})"
     return f"KSP reason {reason}"
-
-
-def assemble(rows, cols, w_laplacian, unknown_row, global_row, is_dummy,
-             number_density, n0, laplacian_coefficient, density, dt, relaxation,
-             compressibility):
-    """CSR rows of the pressure Poisson equation for the owned unknowns.
-
-    For unknown i:  sum_j a w_ij (P_i - P_j) + (rho c / dt^2) P_i
-                    = (rho / dt^2) gamma (n*_i - n0) / n0,
-    with a = 2d/(lambda0 n0), j over non-dummy neighbours; a Dirichlet (free
-    surface) neighbour has P_j = 0 and adds to the diagonal only. The sign makes
-    the matrix symmetric positive definite.
-
-    unknown_row: bool per owned particle; global_row: per local particle (owned
-    and ghost), -1 where P is not an unknown. Returns (indptr, columns, values,
-    rhs) over the unknown rows in local order.
-    """
-    n_owned = len(unknown_row)
-    active = unknown_row[rows] & (w_laplacian > 0.0) & ~is_dummy[cols]
-    diagonal = laplacian_coefficient * np.bincount(rows[active], weights=w_laplacian[active],
-                                                   minlength=n_owned)
-    diagonal += density * compressibility / dt ** 2
-    coupled = active & (global_row[cols] >= 0)
-    coupled_rows = rows[coupled]
-    off_count = np.bincount(coupled_rows, minlength=n_owned)
-    unknown = np.flatnonzero(unknown_row)
-    row_length = 1 + off_count[unknown]
-    csr_indptr = np.zeros(len(unknown) + 1, np.int64)
-    np.cumsum(row_length, out=csr_indptr[1:])
-    columns = np.empty(csr_indptr[-1], np.int64)
-    values = np.empty(csr_indptr[-1], np.float64)
-    columns[csr_indptr[:-1]] = global_row[unknown]
-    values[csr_indptr[:-1]] = diagonal[unknown]
-    # Pairs are grouped by row, so an entry's place in its row is its rank among
-    # the coupled pairs minus the row's first coupled pair.
-    start_in_pairs = np.zeros(n_owned + 1, np.int64)
-    np.cumsum(off_count, out=start_in_pairs[1:])
-    local_unknown_index = np.full(n_owned, -1, np.int64)
-    local_unknown_index[unknown] = np.arange(len(unknown))
-    within_row = np.arange(len(coupled_rows)) - start_in_pairs[coupled_rows]
-    place = csr_indptr[local_unknown_index[coupled_rows]] + 1 + within_row
-    columns[place] = global_row[cols[coupled]]
-    values[place] = -laplacian_coefficient * w_laplacian[coupled]
-    rhs = (density / dt ** 2) * relaxation * (number_density[unknown] - n0) / n0
-    return csr_indptr, columns, values, rhs
