@@ -128,14 +128,16 @@ class SlabDecomposition:
             raise CaseError(
                 f"{comm.size} ranks need slabs at least {self.halo_width:g} m wide (the halo: "
                 f"(mps.re_laplacian + parallel.halo_skin) x particles.spacing), but the domain "
-                f"is {width:g} m wide along x and holds at most {capacity} such slabs: "
-                f"run on at most {capacity} ranks")
+                f"is {width:g} m wide along x and holds at most {capacity} such "
+                f"slab{'s' if capacity > 1 else ''}: run on at most {capacity} "
+                f"rank{'s' if capacity > 1 else ''}")
         # Until distribute: equal widths over the domain.
         self.edges = np.linspace(self.lower, self.upper, comm.size + 1)
         self.halo_seconds = 0.0
         self.migration_seconds = 0.0
         self.rebalance_count = 0
-        self._last_imbalance = np.inf
+        self._reference = (0, 1.0)  # (step, imbalance) the load drift is measured from
+        self._refused = False  # the last rebalance was refused (thin slabs)
         self._send_left = np.empty(0, np.int64)
         self._send_right = np.empty(0, np.int64)
         self._n_from_left = 0
@@ -200,10 +202,10 @@ class SlabDecomposition:
         if total != particles.n_owned:
             raise RuntimeError(f"distribute: ranks hold {total} particles of "
                                f"{particles.n_owned} (the scenes differ between ranks?)")
-        self._last_imbalance = self.imbalance(mine)
+        imbalance = self.imbalance(mine)
+        self._reference = (0, imbalance)
         log.info("distributed %d particles over %d slabs, edges %s, imbalance %.3f",
-                 total, self.size, np.array2string(self.interior_edges, precision=4),
-                 self._last_imbalance)
+                 total, self.size, np.array2string(self.interior_edges, precision=4), imbalance)
         self._clear_halo(mine.n_owned)
         return mine
 
@@ -423,57 +425,74 @@ class SlabDecomposition:
         return _imbalance(self.counts(particles))
 
     def rebalance(self, particles, step):
-        """Every ``rebalance_interval`` steps, if max/mean > tolerance, move edges and migrate.
+        """Move the slab edges to the quantiles of x when the load is uneven; returns owned-only.
 
-        The load is also rebalanced when it is still within the tolerance but
-        grew since the previous check by enough to cross it before the next one
-        (linear projection), so it stays within the tolerance between checks too.
-        The new edges sit at the quantiles of x from a two-level parallel
-        histogram. If they would make an interior slab thinner than the halo,
-        the edges stay where they are (with a warning). Returns owned-only
-        Particles.
+        The load (max/mean owned count) is checked at every step, which costs one
+        small allgather: above ``imbalance_tolerance`` the slabs are rebalanced at
+        once, so no step runs out of balance. Every ``rebalance_interval`` steps
+        the drift of the load is also projected one interval ahead, and a load
+        heading past the tolerance is rebalanced before it gets there.
+
+        The new edges sit at the x quantiles of a two-level parallel histogram,
+        then the particles migrate. If the edges would make an interior slab
+        thinner than the halo, they stay where they are (a warning, repeated at
+        most once per interval) and the run goes on unbalanced.
         """
-        if self.size == 1 or step % self.rebalance_interval != 0:
-            return particles.owned() if particles.n_ghost else particles
+        owned = particles.owned() if particles.n_ghost else particles
+        if self.size == 1:
+            return owned
         start = time.perf_counter()
         try:
-            counts = self.counts(particles)
-            before = _imbalance(counts)
-            # Act before the tolerance is crossed if the drift since the last check
-            # would carry the load past it by the next check.
-            projected = before + max(0.0, before - self._last_imbalance)
-            self._last_imbalance = before
-            if before <= self.imbalance_tolerance and projected <= self.imbalance_tolerance:
-                return particles.owned() if particles.n_ghost else particles
-            x = particles.position[:particles.n_owned, 0]
-            edges = self._histogram_edges(x, int(counts.sum()))
-            if edges is None:
-                return particles.owned() if particles.n_ghost else particles
-            thin = self._thin_slab(edges)
-            if thin is not None:
-                if self.rank == 0:
+            return self._rebalance(owned, step)
+        finally:
+            self.migration_seconds += time.perf_counter() - start
+
+    def _rebalance(self, particles, step):
+        tolerance = self.imbalance_tolerance
+        counts = self.counts(particles)
+        before = _imbalance(counts)
+        periodic = step % self.rebalance_interval == 0
+        reason = None
+        if before > tolerance and (periodic or not self._refused):
+            reason = "over the tolerance"
+        elif periodic:
+            last_step, last_imbalance = self._reference
+            rate = max(0.0, before - last_imbalance) / max(step - last_step, 1)
+            projected = before + rate * self.rebalance_interval
+            if projected > tolerance:
+                reason = f"heading for {projected:.3f} by step {step + self.rebalance_interval}"
+        if periodic:
+            self._reference = (step, before)
+        if reason is None:
+            return particles
+        x = particles.position[:particles.n_owned, 0]
+        edges = self._histogram_edges(x)
+        thin = (0, 0.0) if edges is None else self._thin_slab(edges)
+        if thin is not None:
+            if self.rank == 0 and (periodic or not self._refused):
+                if edges is None:
+                    log.warning("step %d: load imbalance %.3f, but every particle has the same "
+                                "x: keeping the slab edges", step, before)
+                else:
                     log.warning("step %d: load imbalance %.3f, but balancing would make rank "
                                 "%d's slab %.4g m wide, thinner than the halo %.4g m: keeping "
                                 "the slab edges", step, before, thin[0], thin[1],
                                 self.halo_width)
-                return particles.owned() if particles.n_ghost else particles
-            old = self.edges
-            self.edges = edges
-            # Migration is timed inside _migrate's caller: keep the whole rebalance here.
-            result = self._migrate(particles)
-            after = self.imbalance(result)
-            self._last_imbalance = after
-            self.rebalance_count += 1
-            log.info("step %d: rebalanced slabs, imbalance %.3f%s -> %.3f, edges %s -> %s",
-                     step, before, "" if before > self.imbalance_tolerance
-                     else f" (heading for {projected:.3f})", after,
-                     np.array2string(old[1:-1], precision=4),
-                     np.array2string(self.interior_edges, precision=4))
-            return result
-        finally:
-            self.migration_seconds += time.perf_counter() - start
+            self._refused = True
+            return particles
+        self._refused = False
+        old = self.edges
+        self.edges = edges
+        result = self._migrate(particles)
+        after = self.imbalance(result)
+        self._reference = (step, after)
+        self.rebalance_count += 1
+        log.info("step %d: rebalanced slabs (imbalance %.3f, %s) -> %.3f, edges %s -> %s",
+                 step, before, reason, after, np.array2string(old[1:-1], precision=4),
+                 np.array2string(self.interior_edges, precision=4))
+        return result
 
-    def _histogram_edges(self, x, total):
+    def _histogram_edges(self, x):
         """New edges at the x quantiles: an allreduced coarse histogram, then a refined one."""
         x = x[np.isfinite(x)]
         bounds = np.array([-np.min(x) if len(x) else -np.inf,

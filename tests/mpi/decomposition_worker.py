@@ -255,7 +255,7 @@ def check_migrate(comm):
 
 
 def check_rebalance(comm):
-    """A skewed load comes back within the tolerance; a balanced one is left alone."""
+    """A skewed load comes back within the tolerance at once; a balanced one is left alone."""
     tolerance = 1.10
     global_scene = random_scene(6000, 60.0, seed=5)
     decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
@@ -265,20 +265,47 @@ def check_rebalance(comm):
     before = decomposition.imbalance(mine)
     if comm.size > 1:
         assert_all(comm, before > 1.5, f"the skewed scene is not imbalanced ({before:.3f})")
-    same = decomposition.rebalance(decomposition.build_halo(mine), step=6)
-    assert_all(comm, decomposition.rebalance_count == 0 and np.array_equal(same.id, mine.id)
-               and same.n_ghost == 0, "rebalance acted off its interval")
-    balanced = decomposition.rebalance(mine, step=8)
+    # Over the tolerance: rebalanced even between periodic checks.
+    balanced = decomposition.rebalance(decomposition.build_halo(mine), step=6)
     after = decomposition.imbalance(balanced)
+    assert_all(comm, balanced.n_ghost == 0, "rebalance returned ghosts")
     assert_all(comm, after <= tolerance, f"imbalance {after:.4f} after rebalancing "
                                          f"(was {before:.3f})")
     assert_all(comm, decomposition.rebalance_count == (1 if comm.size > 1 else 0),
                f"{decomposition.rebalance_count} rebalances, expected one")
     check_ownership(comm, decomposition, balanced, 6000, "rebalance")
     edges = decomposition.edges.copy()
-    again = decomposition.rebalance(balanced, step=12)
+    again = decomposition.rebalance(balanced, step=8)
     assert_all(comm, np.array_equal(edges, decomposition.edges)
                and np.array_equal(again.id, balanced.id), "a balanced load was rebalanced")
+
+
+def check_rebalance_projection(comm):
+    """Within the tolerance but drifting: a periodic check rebalances ahead of the crossing."""
+    global_scene = random_scene(6000, 60.0, seed=8)
+    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    mine = decomposition.distribute(global_scene)
+    mine = decomposition.rebalance(mine, step=4)  # balanced: the drift is measured from here
+    assert_all(comm, decomposition.rebalance_count == 0, "a balanced load was rebalanced")
+    if comm.size == 1:
+        return
+    # Move 6 % of the mean load from the last slab into the first: imbalance 1.06.
+    mean = 6000 // comm.size
+    last = np.flatnonzero(decomposition.owner(global_scene.position[:, 0]) == comm.size - 1)
+    moved = last[:int(0.06 * mean)]
+    here = np.isin(mine.id, moved)
+    mine.position[here, 0] = decomposition.edges[1] - 1.0 - 4.0 * mine.id[here] / 6000.0
+    mine = decomposition.migrate(mine)
+    imbalance = decomposition.imbalance(mine)
+    assert_all(comm, abs(imbalance - 1.06) < 1e-9, f"set-up: imbalance {imbalance}")
+    edges = decomposition.edges.copy()
+    mine = decomposition.rebalance(mine, step=5)  # within tolerance, not periodic: nothing
+    assert_all(comm, np.array_equal(edges, decomposition.edges), "rebalanced within tolerance "
+                                                                  "off the interval")
+    mine = decomposition.rebalance(mine, step=8)  # 1.06 + 0.06 projected > 1.10: act
+    assert_all(comm, decomposition.rebalance_count == 1, "the drift was not anticipated")
+    assert_all(comm, decomposition.imbalance(mine) < 1.02, "rebalance left the load uneven")
+    check_ownership(comm, decomposition, mine, 6000, "projected rebalance")
 
 
 def check_sweep(comm):
@@ -386,6 +413,7 @@ CHECKS = {
     "refresh": check_refresh,
     "migrate": check_migrate,
     "rebalance": check_rebalance,
+    "rebalance_projection": check_rebalance_projection,
     "sweep": check_sweep,
     "refusals": check_refusals,
     "empty_rank": check_empty_rank,
