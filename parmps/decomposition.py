@@ -527,6 +527,47 @@ class SlabDecomposition:
         return edges
 
 
+def by_id_blocks(particles, comm):
+    """The owned particles regrouped so that rank r holds the r-th block of ids, sorted.
+
+    Collective. Ids are split into ``comm.size`` equal ranges between the
+    smallest and the largest id; each rank gets the particles of its range in
+    ascending id, so writing each rank's particles at ``offset`` (returned, the
+    exclusive scan of the counts) gives one array sorted by id whatever the rank
+    count (for output). Returns (Particles, offset, total).
+    """
+    owned = particles.owned() if particles.n_ghost else particles
+    if comm.size == 1:
+        return _sorted_by_id(owned), 0, owned.n_owned
+    ids = owned.id
+    bounds = np.array([-ids.min() if len(ids) else np.iinfo(np.int64).min,
+                       ids.max() if len(ids) else np.iinfo(np.int64).min], np.int64)
+    comm.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
+    low, high = -bounds[0], bounds[1]
+    if high < low:  # no particles anywhere
+        return owned, 0, 0
+    span = high - low + 1
+    # Block of each id: floor((id - low) * size / span), in exact integer arithmetic.
+    destination = ((ids - low) * comm.size // span).astype(np.int64)
+    arrays = _field_arrays(owned)
+    order = np.argsort(destination, kind="stable")
+    buffer = pack(arrays, order)
+    row = buffer.shape[1]
+    send_counts = np.bincount(destination, minlength=comm.size).astype(np.int64)
+    recv_counts = np.empty(comm.size, np.int64)
+    comm.Alltoall(send_counts, recv_counts)
+    received = np.empty((int(recv_counts.sum()), row), np.uint8)
+    comm.Alltoallv([buffer, (send_counts * row, _displacements(send_counts * row)), MPI.BYTE],
+                   [received, (recv_counts * row, _displacements(recv_counts * row)), MPI.BYTE])
+    block = _sorted_by_id(Particles(dict(zip(FIELDS, unpack_new(received, arrays)))))
+    count = np.array([block.n_owned], np.int64)
+    offset = np.zeros(1, np.int64)
+    comm.Exscan(count, offset)
+    total = np.zeros(1, np.int64)
+    comm.Allreduce(count, total)
+    return block, int(offset[0]) if comm.rank > 0 else 0, int(total[0])
+
+
 def _imbalance(counts):
     mean = counts.sum() / len(counts)
     return float(counts.max() / mean) if mean > 0 else 1.0

@@ -85,11 +85,14 @@ class Output:
         self.rows_written += count
 
     def write_frame(self, step, time, dt, particles):
-        """Write the owned particles (sorted by id) as /frames/<step>; collective."""
-        owned = particles.sorted_by_id()
+        """Write the owned particles (sorted by id) as /frames/<step>; collective.
+
+        The particles are first regrouped by blocks of ids, so the frame is one
+        array in ascending id whatever the rank count.
+        """
+        from parmps.decomposition import by_id_blocks
+        owned, offset, total = by_id_blocks(particles, self.comm)
         count = len(owned)
-        offset = self.comm.exscan(count) or 0
-        total = self.comm.allreduce(count)
         group = self.frames.create_group(f"{step:08d}")
         group.attrs["time"] = time
         group.attrs["step"] = step

@@ -18,7 +18,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps import config
-from parmps.decomposition import SlabDecomposition
+from parmps.decomposition import SlabDecomposition, by_id_blocks
 from parmps.errors import CaseError
 from parmps.particles import DUMMY, FLUID, WALL, Particles
 from parmps.tools.parallel import abort_on_exception, assert_all
@@ -407,6 +407,34 @@ def check_empty_rank(comm):
     check_ownership(comm, decomposition, mine, 600, "empty ranks")
 
 
+def check_by_id_blocks(comm):
+    """Regrouping by id blocks gives one id-sorted array in rank order, for output."""
+    global_scene = random_scene(1000, 30.0, seed=9)
+    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    halo = decomposition.build_halo(decomposition.distribute(global_scene))
+    block, offset, total = by_id_blocks(halo, comm)
+    ids = all_ids(comm, block)
+    assert_all(comm, total == 1000 and np.array_equal(ids, np.arange(1000)),
+               "id blocks are not the sorted ids 0..N-1 in rank order")
+    offsets = comm.allgather(offset)
+    counts = comm.allgather(block.n_owned)
+    assert_all(comm, offsets == list(np.concatenate([[0], np.cumsum(counts)[:-1]])),
+               f"offsets {offsets} do not follow counts {counts}")
+    assert_all(comm, np.array_equal(block.position, global_scene.position[block.id])
+               and np.array_equal(block.pressure, global_scene.pressure[block.id]),
+               "fields did not travel with their ids")
+    # Every particle on one rank, some ids missing: still sorted, nothing lost.
+    only = halo.select(np.flatnonzero((halo.id[:halo.n_owned] % 7 != 3)))
+    everything = Particles.concatenate(comm.allgather(only))
+    gathered = everything if comm.rank == 0 else everything.select(np.empty(0, np.int64))
+    block, offset, total = by_id_blocks(gathered, comm)
+    ids = all_ids(comm, block)
+    expected = np.concatenate(comm.allgather(halo.id[:halo.n_owned]))
+    expected = np.sort(expected[expected % 7 != 3])
+    assert_all(comm, np.array_equal(ids, expected) and total == len(expected),
+               "id blocks from one full rank lost or reordered particles")
+
+
 CHECKS = {
     "distribute_counts": check_distribute_counts,
     "halo": check_halo,
@@ -417,6 +445,7 @@ CHECKS = {
     "sweep": check_sweep,
     "refusals": check_refusals,
     "empty_rank": check_empty_rank,
+    "by_id_blocks": check_by_id_blocks,
 }
 
 
