@@ -272,12 +272,8 @@ class SlabDecomposition:
         to_left = np.flatnonzero(owner == self.rank - 1)
         to_right = np.flatnonzero(owner == self.rank + 1)
         from_left, from_right = self._exchange(pack(arrays, to_left), pack(arrays, to_right))
-        kept = np.flatnonzero(stay)
-        parts = [particles.select(kept)]
-        for buffer in (from_left, from_right):
-            if len(buffer):
-                parts.append(Particles(dict(zip(FIELDS, unpack_new(buffer, arrays)))))
-        return Particles.concatenate(parts)
+        incoming = unpack_new(np.concatenate([from_left, from_right]), arrays)
+        return _merge_by_id(particles, np.flatnonzero(stay), incoming)
 
     def _migrate_all(self, particles, owner):
         """Some particle jumps more than one slab: one all-to-all by owner."""
@@ -575,6 +571,32 @@ def _imbalance(counts):
 
 def _displacements(counts):
     return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+
+
+def _merge_by_id(particles, kept, incoming):
+    """Owned rows ``kept`` of ``particles`` plus ``incoming`` (arrays in FIELDS order), by id.
+
+    The kept rows are usually in ascending id already (migrate keeps them so):
+    then the few incoming particles are merged in with one scatter per field
+    instead of a concatenation and a sort.
+    """
+    ids = particles.arrays["id"][kept]
+    incoming_ids = incoming[list(FIELDS).index("id")]
+    k, m = len(kept), len(incoming_ids)
+    if m == 0 or not np.all(ids[1:] > ids[:-1]):
+        parts = [particles.select(kept), Particles(dict(zip(FIELDS, incoming)))]
+        return _sorted_by_id(Particles.concatenate(parts))
+    order = np.argsort(incoming_ids, kind="stable")
+    sorted_ids = incoming_ids[order]
+    # Final slot of each row: its rank among the kept plus the incoming ids below it.
+    # One gather per field from [all rows of particles, incoming rows].
+    source = np.empty(k + m, np.int64)
+    source[np.arange(k) + np.searchsorted(sorted_ids, ids)] = kept
+    source[np.arange(m) + np.searchsorted(ids, sorted_ids)] = len(particles) + order
+    merged = {}
+    for name, extra in zip(FIELDS, incoming):
+        merged[name] = np.concatenate([particles.arrays[name], extra]).take(source, axis=0)
+    return Particles(merged)
 
 
 def _sorted_by_id(particles):
