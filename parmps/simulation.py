@@ -8,10 +8,11 @@ import numpy as np
 
 from parmps import scene
 from parmps.decomposition import SlabDecomposition
-from parmps.errors import RunFailure
+from parmps.errors import CaseError, RunFailure
 from parmps.fluid import FluidSolver, check_finite, max_speed
 from parmps.output import Output
 from parmps.particles import FLUID, KIND_NAMES
+from parmps.tools.parallel import abort_on_exception
 
 log = logging.getLogger(__name__)
 
@@ -84,7 +85,10 @@ class Run:
         output = Output(comm, self.directory, self.case_text, extra_diagnostics=("imbalance",))
         complete = False
         try:
-            self._loop(output, on_step)
+            # An unexpected exception on one rank must abort the job here: the
+            # collective close below would wait for ranks still inside the step.
+            with abort_on_exception(comm, passthrough=(CaseError, RunFailure)):
+                self._loop(output, on_step)
             complete = True
         finally:
             output.close(complete)

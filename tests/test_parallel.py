@@ -5,13 +5,19 @@
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
 - A decomposition that cannot work is refused with exit status 2 and one line.
+- An exception on one rank ends the whole job within seconds, never a hang.
 """
+
+import time
+from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
-from conftest import CASES, error_lines, run_parmps
+from conftest import CASES, error_lines, run_parmps, run_python
+
+FAULT = Path(__file__).parent / "mpi" / "raise_on_one_rank.py"
 
 # The dam break at the coarse resolution the test budget allows (l0 = a/20).
 COARSE = ["--set", "particles.spacing=0.01"]
@@ -93,3 +99,15 @@ def test_slabs_thinner_than_the_halo_exit_2(tmp_path):
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
     assert "thinner than the halo" in lines[0] and "rank 1" in lines[0]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_exception_on_one_rank_ends_the_run(tmp_path, ranks):
+    start = time.monotonic()
+    result = run_python([FAULT, CASES / "dam_break.toml", "-o", tmp_path] + COARSE,
+                        ranks=ranks, timeout=30)
+    elapsed = time.monotonic() - start
+    assert result.returncode != 0
+    assert elapsed < 30
+    assert f"injected fault on rank {ranks - 1}" in result.stderr
