@@ -197,7 +197,7 @@ class SlabDecomposition:
                 f"ranks")
         self.edges = edges
         keep = np.flatnonzero(self.owner(x) == self.rank)
-        mine = particles.select(keep)
+        mine = _sorted_by_id(particles.select(keep))
         total = self.cart.allreduce(mine.n_owned, op=MPI.SUM)
         if total != particles.n_owned:
             raise RuntimeError(f"distribute: ranks hold {total} particles of "
