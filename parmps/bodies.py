@@ -228,6 +228,24 @@ def _general(label, spec):
     return position, springs, stiffness, mass, boundary, None
 
 
+def _anchored_boundary(label, spec, boundary, shape, n, count):
+    """The loop through the anchors (nodes n, n+1, ...) and one row of the body.
+
+    A lattice closes over its bottom row (right to left) or its top row (left
+    to right); a general body names the anchors in its own boundary list.
+    """
+    anchor_ids = np.arange(n, n + count)
+    if shape is None:
+        if not np.isin(anchor_ids, boundary).all():
+            raise CaseError(f"{label}.boundary must name every anchor (nodes {n}..{n + count - 1}"
+                            f" after the {n} nodes)")
+        return boundary
+    nx, ny = shape
+    grid = np.arange(nx * ny).reshape(ny, nx)
+    row = grid[0, ::-1] if spec["anchor_row"] == "bottom" else grid[-1, :]
+    return np.concatenate([anchor_ids, row])
+
+
 def build_body(k, spec, gravity, domain=None):
     """One :class:`Body` from a validated ``[[body]]`` table."""
     label = _label(k, spec)
@@ -235,7 +253,11 @@ def build_body(k, spec, gravity, domain=None):
     builder = _lattice if spec["type"] == "lattice" else _general
     position, springs, stiffness, mass, boundary, shape = builder(label, spec)
     n = len(position)
-    check_boundary(label, position, boundary)
+    anchors = np.asarray(spec["anchors"], dtype=float).reshape(-1, 2)
+    outline = boundary[boundary < n]
+    if len(anchors):
+        boundary = _anchored_boundary(label, spec, boundary, shape, n, len(anchors))
+    check_boundary(label, np.concatenate([position, anchors]), boundary)
     separation = position[springs[:, 0]] - position[springs[:, 1]]
     short = np.hypot(separation[:, 0], separation[:, 1]) == 0
     if short.any():
@@ -244,9 +266,10 @@ def build_body(k, spec, gravity, domain=None):
                         f"{springs[row, 0]} and {springs[row, 1]} coincide")
     if domain is not None:
         lower, upper = np.asarray(domain["lower"]), np.asarray(domain["upper"])
-        outside = np.any((position < lower) | (position > upper), axis=1)
+        every = np.concatenate([position, anchors])
+        outside = np.any((every < lower) | (every > upper), axis=1)
         if outside.any():
-            x, y = position[np.flatnonzero(outside)[0]]
+            x, y = every[np.flatnonzero(outside)[0]]
             raise CaseError(f"{label} has {int(outside.sum())} nodes outside the domain, "
                             f"e.g. at ({x:.6g}, {y:.6g})")
     pinned = np.zeros(n, bool)
@@ -266,9 +289,17 @@ def build_body(k, spec, gravity, domain=None):
         loads.append((nodes, np.asarray(load["force"]), load["start"], load["end"],
                       load["ramp"]))
     velocity = np.tile(np.asarray(spec["velocity"], dtype=float), (n, 1))
+    if len(anchors):
+        # Anchors follow the material nodes: pinned, at rest, without springs.
+        a = len(anchors)
+        position = np.concatenate([position, anchors])
+        velocity = np.concatenate([velocity, np.zeros((a, 2))])
+        mass = np.concatenate([np.broadcast_to(mass, (n,)), np.full(a, np.mean(mass))])
+        pinned = np.concatenate([pinned, np.ones(a, bool)])
     body = Body(name, position, velocity, mass, springs, stiffness, spec["damping"], boundary,
                 volume_constraint=spec["volume_constraint"], pinned=pinned,
-                gravity=gravity if spec["gravity"] else (0.0, 0.0), loads=loads)
+                gravity=gravity if spec["gravity"] else (0.0, 0.0), loads=loads,
+                anchors=len(anchors), outline=outline)
     log.debug("body %s: %d nodes, %d springs, area %.6g, %d pinned, %d loads", name, n,
               len(springs), body.rest_volume, int(pinned.sum()), len(loads))
     return body

@@ -295,6 +295,10 @@ SCHEMA = {
     "outlet": Section({
         "side": Key("str", choices=("left", "right", "bottom", "top"),
                     doc="the domain side through which fluid leaves and is removed"),
+        "velocity": Key("vec2", [0.0, 0.0],
+                        doc="[0, 0]: plain removal; else fluid within `buffer` layers of "
+                            "the side becomes an outflow buffer moving at this velocity"),
+        "buffer": Key("int", 4, ge=1, le=20, doc="outflow buffer depth, in particles"),
     }, many=True, doc="an open side of the domain: fluid crossing it is removed"),
     "output": Section({
         "frames": Key("bool", True, doc="write particle frames (diagnostics are always written)"),

@@ -76,31 +76,55 @@ def wall_box(spec, spacing, name):
 BUILDERS = {"fluid_block": fluid_block, "tank": tank, "wall_box": wall_box}
 
 
-def build(case):
+def build(case, bodies=None, open_boundaries=None):
     """All particles of the case, ids 0..N-1 in the order of the case's geometry entries.
 
+    Then the material nodes of ``bodies`` (solid nodes, in body order) and last
+    the inflow buffers of ``open_boundaries`` (ids from N, see parmps.inflow).
     Returns the Particles and, for each particle, the index into ``sources`` (the
     names of the geometry entries) that made it.
     """
     spacing = case["particles"]["spacing"]
     positions, kinds, velocities, origin, sources = [], [], [], [], []
+    body_index, node_index, ids = [], [], []
+
+    def add(name, position, kind, velocity, body=None, node=None, id_=None):
+        positions.append(position)
+        kinds.append(kind)
+        velocities.append(velocity)
+        body_index.append(np.full(len(position), -1, np.int32) if body is None else body)
+        node_index.append(np.full(len(position), -1, np.int32) if node is None else node)
+        ids.append(id_)
+        origin.append(np.full(len(position), len(sources), np.int32))
+        sources.append(name)
+
     for section, builder in BUILDERS.items():
         for k, spec in enumerate(case[section]):
             name = f"{section}[{k}]"
-            position, kind, velocity = builder(spec, spacing, name)
-            positions.append(position)
-            kinds.append(kind)
-            velocities.append(velocity)
-            origin.append(np.full(len(position), len(sources), np.int32))
-            sources.append(name)
+            add(name, *builder(spec, spacing, name))
+    if bodies:
+        from parmps.coupling import node_particles
+        nodes = node_particles(bodies)
+        for k, body in enumerate(bodies):
+            mine = nodes.body == k
+            add(f"body[{k}] '{body.name}'", nodes.position[mine], nodes.kind[mine],
+                nodes.velocity[mine], nodes.body[mine], nodes.node[mine])
+    count = sum(len(p) for p in positions)
+    if open_boundaries is not None:
+        for name, buffer in open_boundaries.initial_particles(count):
+            add(name, buffer.position, buffer.kind, buffer.velocity, id_=buffer.id)
     if not positions or not any(len(p) for p in positions):
         raise CaseError("the case has no particles: add a [[fluid_block]]")
     position = np.concatenate(positions)
+    start = np.cumsum([0] + [len(p) for p in positions])
     particles = Particles({
-        "id": np.arange(len(position), dtype=np.int64),
+        "id": np.concatenate([np.arange(start[k], start[k + 1], dtype=np.int64)
+                              if i is None else i for k, i in enumerate(ids)]),
         "kind": np.concatenate(kinds),
         "position": position,
         "velocity": np.concatenate(velocities),
+        "body": np.concatenate(body_index),
+        "node": np.concatenate(node_index),
     })
     origin = np.concatenate(origin)
     check_inside_domain(case, particles, origin, sources)

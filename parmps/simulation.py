@@ -49,7 +49,21 @@ class Run:
         self.end_time = case["time"]["end"] if end_time is None else end_time
         self.spacing = case["particles"]["spacing"]
         self.decomposition = SlabDecomposition(comm, case)
-        global_scene, _, _ = scene.build(case)
+        # Solids and open boundaries only when the case has them.
+        self.coupling = None
+        bodies = None
+        if case["body"]:
+            from parmps.coupling import SolidCoupling, check_body_spacing
+            from parmps.solid import SolidSystem
+            system = SolidSystem.from_case(case)
+            check_body_spacing(case, system.bodies)
+            self.coupling = SolidCoupling(system, comm)
+            bodies = system.bodies
+        self.open_boundaries = None
+        if case["inlet"] or case["outlet"]:
+            from parmps.inflow import OpenBoundaries
+            self.open_boundaries = OpenBoundaries(case, comm)
+        global_scene, _, _ = scene.build(case, bodies, self.open_boundaries)
         self.counts = {KIND_NAMES[k]: int(np.count_nonzero(global_scene.kind == k))
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
         self.particles = self.decomposition.distribute(global_scene)
@@ -82,7 +96,18 @@ class Run:
         self.fluid.pressure_solver = PressureSolver(comm, case["pressure"])
         log.info("pressure solver: %s", self.fluid.pressure_solver.describe())
         # imbalance: largest rank's owned particle count over the mean, for each step.
-        output = Output(comm, self.directory, self.case_text, extra_diagnostics=("imbalance",))
+        extra = ("imbalance",)
+        if self.open_boundaries is not None:
+            extra += ("inflow", "outflow")
+        if self.coupling is not None:
+            from parmps.solid_run import SolidOutput
+            output = SolidOutput(comm, self.directory, self.case_text, self.coupling.system,
+                                 extra_diagnostics=extra, extra_series=("fluid_inside",))
+            for name, count in self.coupling.system.substep_counts(
+                    case["time"]["dt_max"]).items():
+                log.info("body %s: %d substeps per step of dt_max", name, count)
+        else:
+            output = Output(comm, self.directory, self.case_text, extra_diagnostics=extra)
         complete = False
         try:
             # An unexpected exception on one rank must abort the job here: the
@@ -113,6 +138,8 @@ class Run:
                                                            self.step_number < max_steps):
             step = self.step_number + 1
             speed = max_speed(self.particles, comm)
+            if self.coupling is not None:
+                speed = max(speed, self.coupling.max_speed())
             dt = choose_dt(case, speed, self.spacing, step)
             if self.time + dt > self.end_time:
                 dt = self.end_time - self.time
@@ -121,7 +148,16 @@ class Run:
             particles = self.decomposition.rebalance(particles, step)
             particles = self.decomposition.build_halo(particles)
             timers.stop()
+            if self.coupling is not None:
+                self.coupling.predict(particles, dt)
+            if self.open_boundaries is not None:
+                self.open_boundaries.before_step(particles)
             stats = self.fluid.step(particles, dt, step)
+            if self.coupling is not None:
+                self.coupling.step(particles, self.fluid, self.decomposition, self.time, dt)
+            if self.open_boundaries is not None:
+                particles = self.open_boundaries.apply(particles, self.time + dt,
+                                                       self.decomposition.owner, dt)
             self.particles = particles
             self.time += dt
             self.step_number = step
@@ -136,7 +172,11 @@ class Run:
                                      float((particles.velocity[:n][fluid] ** 2).sum()))
             n_fluid = comm.allreduce(int(np.count_nonzero(fluid)))
             now = wallclock.perf_counter()
-            output.add_diagnostics({
+            if self.coupling is not None:
+                output.add_solid_row(self.time, self.coupling.extra_rows(particles))
+            boundary_counts = ({} if self.open_boundaries is None
+                               else self.open_boundaries.diagnostics())
+            output.add_diagnostics({**boundary_counts,
                 "step": step, "time": self.time, "dt": dt,
                 "ksp_iterations": stats["ksp_iterations"], "ksp_residual": stats["ksp_residual"],
                 "max_speed": speed_after, "kinetic_energy": kinetic, "n_fluid": n_fluid,

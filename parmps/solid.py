@@ -189,7 +189,7 @@ class Body:
 
     def __init__(self, name, position, velocity, mass, springs, stiffness, damping,
                  boundary, volume_constraint=True, pinned=None, gravity=(0.0, 0.0),
-                 loads=()):
+                 loads=(), anchors=0, outline=None):
         self.name = name
         self.position = np.array(position, dtype=float).reshape(-1, 2)
         self.velocity = np.array(velocity, dtype=float).reshape(-1, 2)
@@ -202,6 +202,11 @@ class Body:
         separation = self.position[self.springs[:, 0]] - self.position[self.springs[:, 1]]
         self.rest_length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
         self.boundary = np.asarray(boundary, dtype=np.int64)
+        # The last ``anchors`` nodes are fixed points that close the boundary
+        # polygon (over a rigid wall): pinned, no springs, not part of the material.
+        self.n_material = n - int(anchors)
+        # The material's own outline (the boundary loop unless anchors close it).
+        self.outline = self.boundary if outline is None else np.asarray(outline, np.int64)
         self.volume_constraint = bool(volume_constraint) and len(self.boundary) >= 3
         self.pinned = np.zeros(n, bool) if pinned is None else np.asarray(pinned, bool).copy()
         self.inverse_mass = np.where(self.pinned, 0.0, 1.0 / self.mass)
@@ -237,8 +242,9 @@ class Body:
         return (self.volume() - self.rest_volume) / self.rest_volume
 
     def centroid(self):
-        """Centre of mass of the nodes."""
-        return self.mass @ self.position / self.mass.sum()
+        """Centre of mass of the (material) nodes."""
+        m = self.n_material
+        return self.mass[:m] @ self.position[:m] / self.mass[:m].sum()
 
     def total_fluid_force(self):
         return self.fluid_force.sum(axis=0)

@@ -55,9 +55,12 @@ def node_particles(system):
 class SolidOutput(Output):
     """The run's Output plus the per-body series, node frames and spring topology."""
 
-    def __init__(self, comm, directory, case_text, system, extra_diagnostics=()):
+    def __init__(self, comm, directory, case_text, system, extra_diagnostics=(),
+                 extra_series=()):
         super().__init__(comm, directory, case_text, extra_diagnostics)
         self.system = system
+        # More scalar series per body (e.g. fluid_inside in a coupled run).
+        self.series_shapes = dict(SOLID_SERIES, **{name: () for name in extra_series})
         self.solid_groups = {}
         self.solid_series = {}
         root = self.file.create_group("solids")
@@ -69,19 +72,24 @@ class SolidOutput(Output):
             if comm.rank == 0:
                 springs[...] = body.springs
             self.solid_groups[body.name] = group
-            for name, shape in SOLID_SERIES.items():
+            for name, shape in self.series_shapes.items():
                 group.create_dataset(name, shape=(0,) + shape, maxshape=(None,) + shape,
                                      chunks=(1024,) + shape, dtype=np.float64)
-            self.solid_series[body.name] = {name: [] for name in SOLID_SERIES}
+            self.solid_series[body.name] = {name: [] for name in self.series_shapes}
         self.solid_rows = 0
 
-    def add_solid_row(self, time):
-        """Queue one row of every body's series (same values on every rank)."""
+    def add_solid_row(self, time, extra=None):
+        """Queue one row of every body's series (same values on every rank).
+
+        ``extra`` maps a body name to the values of the extra series.
+        """
         for name, values in self.system.diagnostics().items():
             series = self.solid_series[name]
             series["time"].append(time)
-            for key in ("volume_error", "fluid_force", "centroid"):
-                series[key].append(values[key])
+            values = dict(values, **(extra or {}).get(name, {}))
+            for key in self.series_shapes:
+                if key != "time":
+                    series[key].append(values.get(key, np.nan))
 
     def flush_diagnostics(self):
         super().flush_diagnostics()
@@ -90,7 +98,7 @@ class SolidOutput(Output):
             return
         for name, series in self.solid_series.items():
             group = self.solid_groups[name]
-            for key in SOLID_SERIES:
+            for key in self.series_shapes:
                 dataset = group[key]
                 dataset.resize((self.solid_rows + count,) + dataset.shape[1:])
                 if self.comm.rank == 0:

@@ -1,0 +1,218 @@
+"""Fluid-solid coupling, open boundaries and the seed's two scenes (issue 5).
+
+Archimedes (a held body feels rho g V; a free body of the fluid's density stays
+put), no fluid inside any solid at any step, the volume error of every
+constrained body below 1e-5 on 1, 2 and 3 ranks, the same answer (by id) on 1,
+2 and 3 ranks, balanced inflow and outflow, and the two scenes running to their
+end time on 2 ranks at a coarse resolution.
+"""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import CASES, ROOT, error_lines, run_parmps
+from parmps.output import read_frame
+
+TESTS = Path(__file__).resolve().parent
+ARCHIMEDES = TESTS / "cases" / "archimedes.toml"
+MEMBRANE = CASES / "membrane_tube.toml"
+BOX = CASES / "box_in_flow.toml"
+RHO, G, L0 = 1000.0, 9.81, 0.01
+
+
+def solids(path, body):
+    with h5py.File(path, "r") as handle:
+        group = handle["solids"][body]
+        return {key: group[key][()] for key in group}
+
+
+def diagnostics(path):
+    with h5py.File(path, "r") as handle:
+        return {key: value[()] for key, value in handle["diagnostics"].items()}
+
+
+def check_run(result, out, end_time, bodies):
+    """The run finished at its end time, no fluid inside any solid at any step,
+    the volume error of every body below 1e-5 at every step."""
+    assert result.returncode == 0, result.stderr[-3000:]
+    series = diagnostics(out / "result.h5")
+    assert series["time"][-1] == pytest.approx(end_time)
+    for body in bodies:
+        values = solids(out / "result.h5", body)
+        assert len(values["time"]) == len(series["time"])
+        assert values["fluid_inside"].max() == 0, f"fluid inside {body}"
+        assert np.abs(values["volume_error"]).max() < 1e-5, body
+    return series
+
+
+# --- Archimedes ---------------------------------------------------------------------------------
+
+def test_held_body_feels_rho_g_v(tmp_path):
+    """All 25 nodes pinned in a still tank: the vertical fluid force, averaged
+    after 0.4 s of settling, is rho g V with V = 25 l0^2 within 5 %."""
+    out = tmp_path / "held"
+    result = run_parmps([ARCHIMEDES, "-o", out], timeout=240)
+    assert result.returncode == 0, result.stderr[-3000:]
+    values = solids(out / "result.h5", "block")
+    settled = values["time"] > 0.4
+    force = values["fluid_force"][settled].mean(axis=0)
+    expected = RHO * G * 25 * L0 ** 2
+    assert force[1] == pytest.approx(expected, rel=0.05), force
+    assert abs(force[0]) < 0.05 * expected
+    assert values["fluid_inside"].max() == 0
+
+
+def test_free_body_of_fluid_density_stays_put(tmp_path):
+    """The same body free, node mass rho l0^2: its centroid moves less than one
+    spacing in 1 s, and its area is kept."""
+    out = tmp_path / "free"
+    result = run_parmps([ARCHIMEDES, "-o", out, "--set", 'body.0.pinned="none"'], timeout=240)
+    assert result.returncode == 0, result.stderr[-3000:]
+    values = solids(out / "result.h5", "block")
+    assert values["time"][-1] == pytest.approx(1.0)
+    drift = np.hypot(*(values["centroid"] - values["centroid"][0]).T).max()
+    assert drift < L0, drift
+    assert np.abs(values["volume_error"]).max() < 1e-5
+    assert values["fluid_inside"].max() == 0
+
+
+# --- the two scenes on 2 ranks ------------------------------------------------------------------
+
+@pytest.mark.mpi
+def test_membrane_tube_on_two_ranks(tmp_path):
+    """Through the load window and past the release: no leak, area kept, and every
+    fluid particle still below the membrane's lower row at every frame."""
+    out = tmp_path / "membrane"
+    end = 0.5
+    result = run_parmps([MEMBRANE, "-o", out, "--end-time", end,
+                         "--set", "time.output_interval=0.05"], ranks=2, timeout=300)
+    check_run(result, out, end, ["membrane"])
+    values = solids(out / "result.h5", "membrane")
+    # The load pushed the membrane in: its lower row's middle node moved down.
+    with h5py.File(out / "result.h5", "r") as handle:
+        for name, frame in handle["frames"].items():
+            nodes = frame["solids/membrane/position"][()]
+            lower_row = nodes[:39]
+            kind, position = frame["kind"][()], frame["position"][()]
+            fluid = position[kind == 0]
+            below = fluid[:, 1] < np.interp(fluid[:, 0], lower_row[:, 0], lower_row[:, 1])
+            assert below.all(), f"fluid above the membrane's lower row at {name}"
+            if name == "00000000":
+                start = nodes[19, 1]
+            middle = nodes[19, 1]
+    assert np.abs(values["fluid_force"][:, 1]).max() > 0
+    assert middle != start
+
+
+@pytest.mark.mpi
+def test_box_in_flow_on_two_ranks(tmp_path):
+    """The box is carried by the flow without a leak and with its area kept; the
+    inlet and the outlet pass the same flux, U0 H / l0^2 particles per second."""
+    out = tmp_path / "box"
+    end = 0.6
+    result = run_parmps([BOX, "-o", out, "--end-time", end,
+                         "--set", "time.output_interval=0.1"], ranks=2, timeout=300)
+    series = check_run(result, out, end, ["box"])
+    values = solids(out / "result.h5", "box")
+    assert values["centroid"][-1, 0] < values["centroid"][0, 0] - 0.02  # carried along -x
+    time, inflow, outflow = series["time"], series["inflow"], series["outflow"]
+    late = time >= 0.2
+    span = time[late][-1] - time[late][0]
+    rate_in = (inflow[late][-1] - inflow[late][0]) / span
+    rate_out = (outflow[late][-1] - outflow[late][0]) / span
+    expected = 0.1 * 0.21 / L0 ** 2
+    assert rate_in == pytest.approx(expected, rel=0.05)
+    assert rate_out == pytest.approx(rate_in, rel=0.10)
+    counts = series["n_fluid"]
+    assert np.ptp(counts[late]) < 0.05 * counts[0]
+    # New particles got new, unique ids.
+    frame = read_frame(out / "result.h5")
+    assert len(np.unique(frame["id"])) == len(frame["id"])
+    assert frame["id"].max() > 2640
+
+
+# --- the same answer on 1, 2 and 3 ranks --------------------------------------------------------
+
+def compare(reference, other):
+    a, b = read_frame(reference / "result.h5"), read_frame(other / "result.h5")
+    assert np.array_equal(a["id"], b["id"])
+    scale = np.abs(a["position"]).max()
+    assert np.abs(a["position"] - b["position"]).max() <= 1e-9 * scale
+    assert np.abs(a["pressure"] - b["pressure"]).max() <= 1e-7 * max(np.abs(a["pressure"]).max(),
+                                                                   1.0)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("case, end, body", [(MEMBRANE, 0.05, "membrane"), (BOX, 0.1, "box")])
+def test_same_answer_on_one_two_three_ranks(tmp_path, case, end, body):
+    outs = []
+    for ranks in (1, 2, 3):
+        out = tmp_path / f"r{ranks}"
+        result = run_parmps([case, "-o", out, "--end-time", end, "-pressure_ksp_rtol", "1e-12"],
+                            ranks=ranks, timeout=240)
+        check_run(result, out, end, [body])
+        outs.append(out)
+    for other in outs[1:]:
+        compare(outs[0], other)
+    forces = [solids(out / "result.h5", body)["fluid_force"] for out in outs]
+    for force in forces[1:]:
+        assert np.abs(force - forces[0]).max() <= 1e-7 * np.abs(forces[0]).max()
+
+
+# --- bad input and lean scenes ------------------------------------------------------------------
+
+ARCHIMEDES_TEXT = ARCHIMEDES.read_text()
+BOX_TEXT = BOX.read_text()
+BAD = {
+    "body overlapping fluid": (
+        ARCHIMEDES_TEXT.replace("lower = [0.075, 0.075]", "lower = [0.055, 0.075]"),
+        "body[0] 'block' overlaps fluid_block"),
+    "body spacing not l0": (
+        ARCHIMEDES_TEXT.replace("spacing = 0.01\nlower = [0.075", "spacing = 0.02\nlower = [0.075"),
+        "must equal particles.spacing"),
+    "inlet outside the domain": (
+        BOX_TEXT.replace("lower = [0.76, 0.0]\nupper = [0.8, 0.21]",
+                         "lower = [0.78, 0.0]\nupper = [0.82, 0.21]"),
+        "inlet[0] [0.78, 0]-[0.82, 0.21] is outside the domain"),
+    "inlet velocity oblique": (
+        BOX_TEXT.replace("velocity = [-0.1, 0.0]\n\n[[outlet]]", "velocity = [-0.1, 0.1]\n\n"
+                                                                   "[[outlet]]"),
+        "inlet[0].velocity"),
+    "inlet too shallow": (
+        BOX_TEXT.replace("lower = [0.76, 0.0]\nupper = [0.8, 0.21]",
+                         "lower = [0.78, 0.0]\nupper = [0.8, 0.21]"),
+        "needs at least 4"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_bad_coupled_input(tmp_path, name):
+    text, message = BAD[name]
+    path = tmp_path / "case.toml"
+    path.write_text(text)
+    result = run_parmps([path, "--check"], timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+
+
+LEAN = """
+import sys
+from parmps.cli import main
+status = main(sys.argv[1:])
+print(sorted(m for m in ("parmps.coupling", "parmps.inflow") if m in sys.modules))
+sys.exit(status)
+"""
+
+
+def test_pure_fluid_case_builds_no_solid_or_inflow_machinery():
+    result = subprocess.run([sys.executable, "-c", LEAN, CASES / "hydrostatic.toml", "--check"],
+                            cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip().splitlines()[-1] == "[]"
