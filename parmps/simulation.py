@@ -6,7 +6,7 @@ import time as wallclock
 
 import numpy as np
 
-from parmps import scene
+from parmps import guards, scene
 from parmps.decomposition import SlabDecomposition
 from parmps.errors import CaseError, RunFailure
 from parmps.fluid import FluidSolver, check_finite, max_speed
@@ -68,6 +68,7 @@ class Run:
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
         self.particles = self.decomposition.distribute(global_scene)
         self.fluid = FluidSolver(case, comm, self.decomposition)
+        self.wall_rectangles = guards.wall_rectangles(case)
         self.case_text = case_text
         self.time = 0.0
         self.step_number = 0
@@ -208,9 +209,12 @@ class Run:
                  1e6 * elapsed / max(particle_steps, 1))
 
     def _check(self, particles, dt, step):
-        """Stop loudly on NaN, a particle leaving the domain, or a Courant breach."""
+        """Stop loudly on NaN, a blown-up body, a particle leaving the domain or going
+        through a wall, or a Courant breach."""
         comm = self.comm
         check_finite(particles, comm, step)
+        if self.coupling is not None:
+            guards.check_bodies(self.coupling.system.bodies, step, self.time)
         n = particles.n_owned
         lower = np.asarray(self.case["domain"]["lower"])
         upper = np.asarray(self.case["domain"]["upper"])
@@ -229,3 +233,6 @@ class Run:
             raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
                              f"{speed:.4g} m/s, dt {dt:.3g} s): particles jump more than a "
                              f"spacing per step; the run is unstable")
+        # After the Courant check: a particle that jumped into a wall because the
+        # step was too long should be reported as the Courant breach it is.
+        guards.check_wall_penetration(particles, self.wall_rectangles, self.spacing, comm, step)

@@ -21,6 +21,7 @@ import time as wallclock
 
 import numpy as np
 
+from parmps import guards
 from parmps.errors import RunFailure
 from parmps.output import Output
 from parmps.particles import SOLID, Particles
@@ -234,7 +235,11 @@ class SolidRun:
                                                            self.step_number < max_steps):
             step = self.step_number + 1
             dt = min(self.dt, self.end_time - self.time)
-            self.system.advance(self.time, dt)
+            try:
+                self.system.advance(self.time, dt)
+            except RunFailure as exc:
+                # The solver knows the time, the loop the step: name both.
+                raise RunFailure(f"step {step}: {exc}") from None
             self.time += dt
             self.step_number = step
             self._check(step, lower, upper)
@@ -266,6 +271,7 @@ class SolidRun:
                                          for name, v in self.system.diagnostics().items()))
 
     def _check(self, step, lower, upper):
+        guards.check_bodies(self.system.bodies, step, self.time)
         for body in self.system.bodies:
             outside = np.any((body.position < lower) | (body.position > upper), axis=1)
             if outside.any():
