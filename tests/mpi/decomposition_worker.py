@@ -21,7 +21,7 @@ from parmps import config
 from parmps.decomposition import SlabDecomposition, by_id_blocks
 from parmps.errors import CaseError
 from parmps.particles import DUMMY, FLUID, WALL, Particles
-from parmps.tools.parallel import abort_on_exception, assert_all
+from parmps.tools.parallel import abort_on_exception, agree, assert_all
 
 SPACING = 1.0
 HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
@@ -435,6 +435,29 @@ def check_by_id_blocks(comm):
                "id blocks from one full rank lost or reordered particles")
 
 
+def check_agree(comm):
+    """An error raised on one rank is raised on every rank, same type and message."""
+    def fail_on_last():
+        if comm.rank == comm.size - 1:
+            raise CaseError(f"bad thing seen by rank {comm.rank}")
+        return comm.rank
+    try:
+        agree(comm, fail_on_last)
+        message = None
+    except CaseError as error:
+        message = str(error)
+    messages = comm.allgather(message)
+    assert_all(comm, messages == [f"bad thing seen by rank {comm.size - 1}"] * comm.size,
+               f"agree gave {messages}")
+    assert_all(comm, agree(comm, lambda: comm.rank * 2) == comm.rank * 2, "agree's result")
+    failed = None
+    try:
+        assert_all(comm, comm.rank != 0, "rank 0 says no")
+    except AssertionError as error:
+        failed = str(error)
+    assert_all(comm, failed == "rank 0: rank 0 says no", f"assert_all raised {failed!r}")
+
+
 CHECKS = {
     "distribute_counts": check_distribute_counts,
     "halo": check_halo,
@@ -446,6 +469,7 @@ CHECKS = {
     "refusals": check_refusals,
     "empty_rank": check_empty_rank,
     "by_id_blocks": check_by_id_blocks,
+    "agree": check_agree,
 }
 
 
