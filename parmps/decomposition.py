@@ -24,11 +24,22 @@ neighbours of the end slabs are ``MPI.PROC_NULL``, so exchanges need no special
 cases.
 
 Halo. Ghosts are copies of the owned particles whose distance to a slab edge is
-less than ``halo_width = (re_laplacian + halo_skin) * spacing``, sent to the
-neighbour across that edge only. That is complete as long as every interior slab
-is at least ``halo_width`` wide, which the constructor, :meth:`distribute` and
-:meth:`rebalance` enforce. Ghosts come after the owned particles: first those
-from the left neighbour, then those from the right, each in the owner's order.
+less than ``halo_width = reach + margin`` (``reach = (re_laplacian +
+halo_skin) * spacing``, ``margin`` below), sent to the neighbour across that
+edge only. That is complete as long as every interior slab is at least
+``min_slab_width = reach + 2 margin`` wide, which the constructor,
+:meth:`distribute` and :meth:`rebalance` enforce. Ghosts come after the owned
+particles: first those from the left neighbour, then those from the right, each
+in the owner's order.
+
+Lazy migration. With ``parallel.migration_margin`` m > 0 (in spacings),
+particles may stray up to m past their slab before anyone migrates: while no
+particle on any rank is further out, :meth:`migrate` only drops the ghosts;
+once one is, every particle outside its slab moves to its owner. The ranks' row
+counts then change every few steps instead of every step, so the pressure
+solver can keep its AMG set-up (which cannot survive a change of layout) as
+long as on one rank. The halo and the slabs widen by the margin to stay
+complete. m = 0 migrates at every step.
 
 Order. Owned particles are kept in ascending global id after every
 :meth:`distribute` and :meth:`migrate`, so the local order does not depend on
@@ -52,6 +63,9 @@ from parmps.errors import CaseError
 from parmps.particles import FIELDS, Particles
 
 log = logging.getLogger(__name__)
+
+_WIDTH_RULE = ("(mps.re_laplacian + parallel.halo_skin + 2 x parallel.migration_margin) x "
+               "particles.spacing")
 
 # Coarse and fine bins of the two-level parallel histogram used by rebalance.
 _HISTOGRAM_BINS = 1024
@@ -115,7 +129,11 @@ class SlabDecomposition:
         self.left, self.right = self.cart.Shift(0, 1)
         spacing = case["particles"]["spacing"]
         self.spacing = float(spacing)
-        self.halo_width = (case["mps"]["re_laplacian"] + case["parallel"]["halo_skin"]) * spacing
+        # reach: the neighbour-search radius (re_laplacian plus the skin).
+        self.reach = (case["mps"]["re_laplacian"] + case["parallel"]["halo_skin"]) * spacing
+        self.margin = float(case["parallel"].get("migration_margin", 0.0)) * spacing
+        self.halo_width = self.reach + self.margin
+        self.min_slab_width = self.reach + 2.0 * self.margin
         self.lower = float(case["domain"]["lower"][0])
         self.upper = float(case["domain"]["upper"][0])
         parallel = case["parallel"]
@@ -123,11 +141,11 @@ class SlabDecomposition:
         self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
         width = self.upper - self.lower
         # Every slab must be at least one halo wide: the domain holds so many slabs.
-        capacity = max(1, int(np.floor(width / self.halo_width * (1 + 1e-12))))
+        capacity = max(1, int(np.floor(width / self.min_slab_width * (1 + 1e-12))))
         if comm.size > capacity:
             raise CaseError(
-                f"{comm.size} ranks need slabs at least {self.halo_width:g} m wide (the halo: "
-                f"(mps.re_laplacian + parallel.halo_skin) x particles.spacing), but the domain "
+                f"{comm.size} ranks need slabs at least {self.min_slab_width:g} m wide "
+                f"({_WIDTH_RULE}), but the domain "
                 f"is {width:g} m wide along x and holds at most {capacity} such "
                 f"slab{'s' if capacity > 1 else ''}: run on at most {capacity} "
                 f"rank{'s' if capacity > 1 else ''}")
@@ -136,6 +154,7 @@ class SlabDecomposition:
         self.halo_seconds = 0.0
         self.migration_seconds = 0.0
         self.rebalance_count = 0
+        self.migration_count = 0  # migrations that moved particles
         self._reference = (0, 1.0)  # (step, imbalance) the load drift is measured from
         self._refused = False  # the last rebalance was refused (thin slabs)
         self._send_left = np.empty(0, np.int64)
@@ -168,7 +187,7 @@ class SlabDecomposition:
         if len(edges) <= 3:
             return None
         widths = np.diff(edges[1:-1])
-        thin = np.flatnonzero(~(widths >= self.halo_width * (1 - 1e-12)))
+        thin = np.flatnonzero(~(widths >= self.min_slab_width * (1 - 1e-12)))
         if len(thin) == 0:
             return None
         return int(thin[0]) + 1, float(widths[thin[0]])
@@ -192,9 +211,8 @@ class SlabDecomposition:
             rank, width = thin
             raise CaseError(
                 f"{self.size} ranks split the particles into slabs along x of which rank "
-                f"{rank}'s is {width:g} m wide, thinner than the halo {self.halo_width:g} m "
-                f"((mps.re_laplacian + parallel.halo_skin) x particles.spacing): run on fewer "
-                f"ranks")
+                f"{rank}'s is {width:g} m wide, thinner than the halo {self.min_slab_width:g} m "
+                f"({_WIDTH_RULE}): run on fewer ranks")
         self.edges = edges
         keep = np.flatnonzero(self.owner(x) == self.rank)
         mine = _sorted_by_id(particles.select(keep))
@@ -237,8 +255,10 @@ class SlabDecomposition:
     def migrate(self, particles):
         """Drop ghosts; send owned particles that left this slab to their owners.
 
-        Handles jumps over any number of slabs. Returns owned-only Particles in
-        ascending global id.
+        With a migration margin, nothing moves until some particle on some rank
+        is more than the margin outside its slab; then every particle outside
+        its slab moves. Handles jumps over any number of slabs. Returns
+        owned-only Particles in ascending global id.
         """
         start = time.perf_counter()
         try:
@@ -246,17 +266,27 @@ class SlabDecomposition:
         finally:
             self.migration_seconds += time.perf_counter() - start
 
-    def _migrate(self, particles):
+    def _migrate(self, particles, force=False):
         n = particles.n_owned
         if self.size == 1:
             result = particles.owned() if particles.n_ghost else particles
             self._clear_halo(result.n_owned)
             return _sorted_by_id(result)
-        owner = self.owner(particles.position[:n, 0])
+        x = particles.position[:n, 0]
+        owner = self.owner(x)
         stay = owner == self.rank
         leaving = np.flatnonzero(~stay)
-        distance = int(np.max(np.abs(owner[leaving] - self.rank))) if len(leaving) else 0
-        distance = self.cart.allreduce(distance, op=MPI.MAX)
+        # [farthest jump in slabs, a particle past the margin] over all ranks.
+        state = np.zeros(2, np.int64)
+        if len(leaving):
+            state[0] = np.max(np.abs(owner[leaving] - self.rank))
+            lo, hi = self.slab
+            state[1] = force or self.margin == 0.0 or bool(
+                np.any((x[leaving] < lo - self.margin) | (x[leaving] >= hi + self.margin)))
+        self.cart.Allreduce(MPI.IN_PLACE, state, op=MPI.MAX)
+        distance = int(state[0]) if state[1] else 0
+        if distance:
+            self.migration_count += 1
         if distance == 0:
             result = particles.owned() if particles.n_ghost else particles
         elif distance == 1:
@@ -473,13 +503,13 @@ class SlabDecomposition:
                     log.warning("step %d: load imbalance %.3f, but balancing would make rank "
                                 "%d's slab %.4g m wide, thinner than the halo %.4g m: keeping "
                                 "the slab edges", step, before, thin[0], thin[1],
-                                self.halo_width)
+                                self.min_slab_width)
             self._refused = True
             return particles
         self._refused = False
         old = self.edges
         self.edges = edges
-        result = self._migrate(particles)
+        result = self._migrate(particles, force=True)
         after = self.imbalance(result)
         self._reference = (step, after)
         self.rebalance_count += 1

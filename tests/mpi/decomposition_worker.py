@@ -28,6 +28,8 @@ HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
 
 
 def make_case(lower_x, upper_x, **parallel):
+    """A case with the default halo; strict migration (no margin) unless asked."""
+    parallel.setdefault("migration_margin", 0.0)
     return config.validate({
         "domain": {"lower": [lower_x, 0.0], "upper": [upper_x, 10.0]},
         "particles": {"spacing": SPACING},
@@ -458,11 +460,53 @@ def check_agree(comm):
     assert_all(comm, failed == "rank 0: rank 0 says no", f"assert_all raised {failed!r}")
 
 
+def check_lazy_migration(comm):
+    """With a margin, particles stray up to it before migrating, and the halo stays complete."""
+    margin = 0.5
+    global_scene = random_scene(2000, 40.0, seed=10)
+    decomposition = SlabDecomposition(comm, make_case(0.0, 40.0, migration_margin=margin))
+    assert_all(comm, decomposition.halo_width == HALO + margin
+               and decomposition.min_slab_width == HALO + 2 * margin, "halo/slab widths")
+    mine = decomposition.distribute(global_scene)
+    position = global_scene.position.copy()
+    # Everyone moves by +-0.45: some leave their slab, none by more than the margin.
+    position[:, 0] += np.where(global_scene.id % 2 == 0, 0.45, -0.45)
+    mine.position[:] = position[mine.id]
+    before = mine.id.copy()
+    mine = decomposition.migrate(decomposition.build_halo(mine))
+    assert_all(comm, np.array_equal(mine.id, before) and decomposition.migration_count == 0,
+               "particles within the margin migrated")
+    strays = np.count_nonzero(decomposition.owner(mine.position[:, 0]) != comm.rank)
+    if comm.size > 1:
+        assert_all(comm, comm.allreduce(strays) > 0, "the test moved nobody out of a slab")
+    # The halo covers every neighbour of the strays too.
+    halo = decomposition.build_halo(mine)
+    local = set(halo.id.tolist())
+    reach = 3.1 * SPACING
+    missing = 0
+    for start in range(0, halo.n_owned, 256):
+        block = halo.position[start:min(start + 256, halo.n_owned)]
+        d2 = ((block[:, None, :] - position[None, :, :]) ** 2).sum(axis=2)
+        near = np.unique(np.nonzero(d2 < reach * reach)[1])
+        missing += sum(1 for j in near.tolist() if j not in local)
+    assert_all(comm, missing == 0, f"{missing} neighbours of owned particles missing")
+    # One particle goes past the margin: every stray migrates, ownership is strict again.
+    first = int(np.argmin(position[:, 0]))  # owned by rank 0
+    if comm.size > 1:
+        position[first, 0] = decomposition.edges[1] + margin + 0.2
+    halo.position[:halo.n_owned] = position[halo.id[:halo.n_owned]]
+    mine = decomposition.migrate(halo)
+    if comm.size > 1:
+        assert_all(comm, decomposition.migration_count == 1, "no migration past the margin")
+    check_ownership(comm, decomposition, mine, 2000, "lazy migration")
+
+
 CHECKS = {
     "distribute_counts": check_distribute_counts,
     "halo": check_halo,
     "refresh": check_refresh,
     "migrate": check_migrate,
+    "lazy_migration": check_lazy_migration,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
     "sweep": check_sweep,

@@ -15,11 +15,11 @@ from parmps import cli, fluid
 _step = fluid.FluidSolver.step
 
 
-def faulty_step(self, particles, dt, step_number):
+def faulty_step(self, particles, dt, step_number, *args, **kwargs):
     comm = MPI.COMM_WORLD
     if step_number == 3 and comm.rank == comm.size - 1:
         raise ZeroDivisionError(f"injected fault on rank {comm.rank}")
-    return _step(self, particles, dt, step_number)
+    return _step(self, particles, dt, step_number, *args, **kwargs)
 
 
 fluid.FluidSolver.step = faulty_step
