@@ -2,6 +2,7 @@
 
 - The dam break after 50 steps on 2 and 3 ranks matches the one-rank run to 1e-9
   (positions and pressures, matched by global id) with -pressure_ksp_rtol 1e-12.
+- The hydrostatic tank on 2 ranks gives rho g (H - y) within 2 %, like one rank.
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
 - A decomposition that cannot work is refused with exit status 2 and one line.
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps, run_python
+from parmps import analysis
 
 FAULT = Path(__file__).parent / "mpi" / "raise_on_one_rank.py"
 
@@ -58,6 +60,18 @@ def test_dam_break_after_50_steps_matches_one_rank(one_rank_dam_break, tmp_path,
     assert position_error < 1e-9, position_error
     assert pressure_error < 1e-9, pressure_error
     assert pressure1.max() > 100.0  # a real pressure field, not zeros
+
+
+@pytest.mark.mpi
+def test_hydrostatic_pressure_on_two_ranks(tmp_path):
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "1.0"],
+                        ranks=2, timeout=300)
+    assert result.returncode == 0, result.stderr
+    bottom, rms = analysis.hydrostatic_error(tmp_path / "result.h5", depth=0.2, density=1000.0,
+                                             gravity=9.81, settle_time=0.3, spacing=0.01)
+    assert abs(bottom) < 0.02, bottom
+    assert rms < 0.02, rms
+    assert analysis.escaped(tmp_path / "result.h5", [0.0, 0.0], [0.2, 0.36]) == 0
 
 
 @pytest.mark.mpi
