@@ -299,6 +299,9 @@ SCHEMA = {
                         doc="[0, 0]: plain removal; else fluid within `buffer` layers of "
                             "the side becomes an outflow buffer moving at this velocity"),
         "buffer": Key("int", 4, ge=1, le=20, doc="outflow buffer depth, in particles"),
+        "pressure": Key("str", "dirichlet", choices=("dirichlet", "fluid"),
+                        doc="outflow buffer particles: P = 0 (the channel's pressure "
+                            "reference) or pressure unknowns like fluid"),
     }, many=True, doc="an open side of the domain: fluid crossing it is removed"),
     "output": Section({
         "frames": Key("bool", True, doc="write particle frames (diagnostics are always written)"),

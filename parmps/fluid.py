@@ -80,8 +80,12 @@ class FluidSolver:
     def moving(kind):
         return (kind == FLUID) | (kind == INFLOW)
 
-    def step(self, particles, dt, step_number):
-        """Advance the particles (with current ghosts) by dt; returns step statistics."""
+    def step(self, particles, dt, step_number, dirichlet=None):
+        """Advance the particles (with current ghosts) by dt; returns step statistics.
+
+        ``dirichlet``: optional owned-length mask of particles held at P = 0
+        besides the free surface (an outlet's pressure reference).
+        """
         timers = self.timers
         decomposition = self.decomposition
         n = particles.n_owned
@@ -124,6 +128,9 @@ class FluidSolver:
             surface |= neighbour_count < self.neighbour_threshold * self.neighbour_count0
         has_pressure = kind != DUMMY
         unknown = has_pressure[:n] & ~surface
+        if dirichlet is not None:
+            # Open boundaries: a closed channel otherwise has no pressure level.
+            unknown &= ~dirichlet
         pressure_index = np.flatnonzero(has_pressure[:n])
         first_row = self.comm.exscan(len(pressure_index)) or 0
         row_number = np.full(len(particles), -1, np.int64)

@@ -21,7 +21,9 @@ within ``buffer`` layers of the side becomes an outflow buffer (kind 4 too)
 that moves rigidly at that velocity until it leaves: the outflow then matches
 the inflow instead of following the MPS pressure noise, whose clamped positive
 mean would otherwise push the fluid out through a free (P = 0) end faster than
-it enters.
+it enters. The buffer is Dirichlet (P = 0) by default (``pressure =
+"dirichlet"``): it gives the otherwise closed channel its pressure level;
+``pressure = "fluid"`` makes its particles pressure unknowns.
 
 Cumulative counts of particles that became fluid (inflow) and were removed
 (outflow) go into the diagnostics, with ``n_fluid``; in a steady state the two
@@ -157,14 +159,16 @@ class OpenBoundaries:
         self.lower = np.asarray(case["domain"]["lower"], dtype=float)
         self.upper = np.asarray(case["domain"]["upper"], dtype=float)
         spacing = case["particles"]["spacing"]
-        # Outflow buffers: (axis, side, zone start, velocity) for outlets with a velocity.
+        # Outflow buffers: (axis, side, zone start, velocity, P = 0?) for outlets with a
+        # velocity.
         self.outflow_buffers = []
         for spec, (axis, side) in zip(case["outlet"], self.outlets):
             velocity = np.asarray(spec["velocity"], dtype=float)
             if np.any(velocity != 0.0):
                 edge = self.lower[axis] if side < 0 else self.upper[axis]
                 start = edge - side * spec["buffer"] * spacing
-                self.outflow_buffers.append((axis, side, start, velocity))
+                self.outflow_buffers.append((axis, side, start, velocity,
+                                             spec["pressure"] == "dirichlet"))
         self._saved = None
         self.inflow_total = 0
         self.outflow_total = 0
@@ -180,16 +184,28 @@ class OpenBoundaries:
         return position[:, axis] < start if side < 0 else position[:, axis] > start
 
     def before_step(self, particles):
-        """Remember where the owned outflow-buffer particles start the step."""
+        """Remember where the owned outflow-buffer particles start the step.
+
+        Returns the owned-length mask of the particles the fluid step must hold
+        at P = 0 (outflow buffers with ``pressure = "dirichlet"``), or None.
+
+        With an outflow buffer moving at a set velocity the channel has no free
+        surface: a pressure unknown everywhere leaves the PPE only the small
+        artificial compressibility to fix the pressure level, which creeps up
+        by kilopascals over a run. A P = 0 outlet is the channel's reference.
+        """
         if not self.outflow_buffers:
-            return
+            return None
         n = particles.n_owned
         saved = []
-        for axis, side, start, velocity in self.outflow_buffers:
+        dirichlet = np.zeros(n, bool)
+        for axis, side, start, velocity, zero_pressure in self.outflow_buffers:
             index = np.flatnonzero((particles.kind[:n] == INFLOW) & self._in_outflow_zone(
                 particles.position[:n], axis, side, start))
             saved.append((index, particles.position[index].copy(), velocity))
+            dirichlet[index] = zero_pressure
         self._saved = saved
+        return dirichlet if any(buffer[4] for buffer in self.outflow_buffers) else None
 
     def _move_outflow_buffers(self, particles, dt):
         """Prescribed motion of the outflow buffers; fluid entering them joins them."""
@@ -199,7 +215,7 @@ class OpenBoundaries:
             particles.position[index] = start_position + dt * velocity
             particles.velocity[index] = velocity
         n = particles.n_owned
-        for axis, side, start, velocity in self.outflow_buffers:
+        for axis, side, start, velocity, _ in self.outflow_buffers:
             entering = np.flatnonzero((particles.kind[:n] == FLUID) & self._in_outflow_zone(
                 particles.position[:n], axis, side, start))
             particles.kind[entering] = INFLOW

@@ -151,9 +151,10 @@ class Run:
             timers.stop()
             if self.coupling is not None:
                 self.coupling.predict(particles, dt)
+            dirichlet = None
             if self.open_boundaries is not None:
-                self.open_boundaries.before_step(particles)
-            stats = self.fluid.step(particles, dt, step)
+                dirichlet = self.open_boundaries.before_step(particles)
+            stats = self.fluid.step(particles, dt, step, dirichlet)
             if self.coupling is not None:
                 self.coupling.step(particles, self.fluid, self.decomposition, self.time, dt)
             if self.open_boundaries is not None:
