@@ -42,6 +42,13 @@ class PressureSolver:
         self.PETSc = PETSc
         self.comm = comm
         options = PETSc.Options()
+        # Measured on the 40k-particle dam break: dropping weak couplings below 0.04
+        # when aggregating halves CG iterations and makes set-ups cheaper.
+        code_defaults = {"pc_gamg_threshold": "0.04"}
+        for name, value in code_defaults.items():
+            if settings["pc_type"] == "gamg" and not options.hasName(OPTIONS_PREFIX + name) \
+                    and name not in settings["options"]:
+                options.setValue(OPTIONS_PREFIX + name, value)
         # Case-file options apply unless the command line already set the same name.
         for name, value in settings["options"].items():
             full = OPTIONS_PREFIX + name.lstrip("-")

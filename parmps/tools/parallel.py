@@ -22,12 +22,13 @@ import subprocess
 import sys
 import traceback
 
-from mpi4py import MPI
-
 log = logging.getLogger(__name__)
 
 
 def _world():
+    # Imported here: a process that only launches mpirun (pytest, bench.py) must
+    # not start MPI itself.
+    from mpi4py import MPI
     return MPI.COMM_WORLD
 
 
@@ -100,6 +101,7 @@ def agree(comm, func, *args, errors=None, **kwargs):
 
 def any_rank(comm, flag):
     """True on every rank if ``flag`` is true on at least one rank."""
+    from mpi4py import MPI
     return bool(comm.allreduce(bool(flag), op=MPI.LOR))
 
 
