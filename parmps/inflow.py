@@ -37,21 +37,12 @@ from mpi4py import MPI
 
 from parmps.errors import CaseError
 from parmps.particles import FLUID, INFLOW, Particles
+from parmps.scene import lattice_count
 
 log = logging.getLogger(__name__)
 
 ID_STRIDE = 2 ** 40  # ids reserved per inlet
-_LATTICE_TOLERANCE = 1e-6
 SIDES = {"left": (0, -1), "right": (0, 1), "bottom": (1, -1), "top": (1, 1)}
-
-
-def _count(name, extent, spacing):
-    count = extent / spacing
-    rounded = int(round(count))
-    if abs(count - rounded) > _LATTICE_TOLERANCE * max(1.0, count) or rounded < 1:
-        raise CaseError(f"{name}: extent {extent:g} is not a whole number of "
-                        f"particles.spacing {spacing:g} ({count:.4f} spacings)")
-    return rounded
 
 
 class Inlet:
@@ -79,14 +70,14 @@ class Inlet:
             raise CaseError(f"{self.name} [{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, "
                             f"{upper[1]:g}] is outside the domain [{domain_lower[0]:g}, "
                             f"{domain_lower[1]:g}]-[{domain_upper[0]:g}, {domain_upper[1]:g}]")
-        self.columns = _count(f"{self.name} depth along the flow",
+        self.columns = lattice_count(f"{self.name} depth along the flow",
                               upper[self.axis] - lower[self.axis], spacing)
         needed = int(np.ceil(case["mps"]["re_laplacian"]))
         if self.columns < needed:
             raise CaseError(f"{self.name} is {self.columns} particles deep along the flow; it "
                             f"needs at least {needed} (mps.re_laplacian) so the fluid next to "
                             f"it has a full neighbourhood")
-        self.count = _count(f"{self.name} width across the flow",
+        self.count = lattice_count(f"{self.name} width across the flow",
                             upper[self.cross] - lower[self.cross], spacing)
         self.depth = self.columns * spacing
         self.upstream = lower[self.axis] if self.sign > 0 else upper[self.axis]

@@ -17,7 +17,8 @@ from parmps.particles import DUMMY, FLUID, WALL, Particles
 _LATTICE_TOLERANCE = 1e-6
 
 
-def _cell_count(name, extent, spacing):
+def lattice_count(name, extent, spacing):
+    """How many lattice spacings fit ``extent``; refuse an extent that is not a whole number."""
     count = extent / spacing
     rounded = int(round(count))
     if abs(count - rounded) > _LATTICE_TOLERANCE * max(1.0, count) or rounded < 1:
@@ -38,8 +39,8 @@ def _lattice(lower, nx, ny, spacing, i0=0, j0=0):
 
 def fluid_block(block, spacing, name):
     lower = block["lower"]
-    nx = _cell_count(f"{name} width", block["upper"][0] - lower[0], spacing)
-    ny = _cell_count(f"{name} height", block["upper"][1] - lower[1], spacing)
+    nx = lattice_count(f"{name} width", block["upper"][0] - lower[0], spacing)
+    ny = lattice_count(f"{name} height", block["upper"][1] - lower[1], spacing)
     position, _, _ = _lattice(lower, nx, ny, spacing)
     velocity = np.tile(np.asarray(block["velocity"], dtype=float), (len(position), 1))
     return position, np.full(len(position), FLUID, np.int8), velocity
@@ -48,8 +49,8 @@ def fluid_block(block, spacing, name):
 def tank(spec, spacing, name):
     """Walls on the left, right and bottom of the inner rectangle (and the top if closed)."""
     lower = spec["lower"]
-    nx = _cell_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
-    ny = _cell_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
+    nx = lattice_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
+    ny = lattice_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
     layers = spec["wall_layers"] + spec["dummy_layers"]
     top = ny + (0 if spec["open_top"] else layers)
     position, ii, jj = _lattice(lower, nx + 2 * layers, top + layers, spacing,
@@ -65,8 +66,8 @@ def tank(spec, spacing, name):
 def wall_box(spec, spacing, name):
     """A filled rectangle: its outer wall_layers are wall particles, the core is dummy."""
     lower = spec["lower"]
-    nx = _cell_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
-    ny = _cell_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
+    nx = lattice_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
+    ny = lattice_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
     position, ii, jj = _lattice(lower, nx, ny, spacing)
     depth = np.minimum.reduce([ii, nx - 1 - ii, jj, ny - 1 - jj])
     kind = np.where(depth < spec["wall_layers"], WALL, DUMMY).astype(np.int8)
