@@ -9,7 +9,6 @@ reach it, in that order of precedence over the code's defaults.
 
 import logging
 
-import numpy as np
 
 from parmps.errors import RunFailure
 

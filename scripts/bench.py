@@ -23,7 +23,7 @@ CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 
 def spacing_for(target):
     """The l0 = a/m (a = 0.2 m) whose dam-break scene holds closest to ``target`` particles."""
-    from parmps import config, scene
+    from parmps import scene
     best = None
     for m in range(10, 400):
         spacing = 0.2 / m
