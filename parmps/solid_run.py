@@ -22,10 +22,11 @@ import time as wallclock
 import numpy as np
 
 from parmps import guards
-from parmps.errors import RunFailure
+from parmps.errors import CaseError, RunFailure
 from parmps.output import Output
 from parmps.particles import SOLID, Particles
 from parmps.solid import SolidSystem
+from parmps.tools.parallel import abort_on_exception
 
 log = logging.getLogger(__name__)
 
@@ -210,7 +211,10 @@ class SolidRun:
         output = SolidOutput(self.comm, self.directory, self.case_text, self.system)
         complete = False
         try:
-            self._loop(output)
+            # As in simulation.Run: an unexpected exception on one rank aborts the
+            # job, since the collective close would wait for the other ranks.
+            with abort_on_exception(self.comm, passthrough=(CaseError, RunFailure)):
+                self._loop(output)
             complete = True
         finally:
             output.close(complete)

@@ -20,6 +20,7 @@ from conftest import CASES, error_lines, run_parmps, run_python
 from parmps import analysis
 
 FAULT = Path(__file__).parent / "mpi" / "raise_on_one_rank.py"
+SOLID_FAULT = Path(__file__).parent / "mpi" / "raise_in_solid_run.py"
 
 # The dam break at the coarse resolution the test budget allows (l0 = a/20).
 COARSE = ["--set", "particles.spacing=0.01"]
@@ -129,4 +130,15 @@ def test_exception_on_one_rank_ends_the_run(tmp_path, ranks):
     elapsed = time.monotonic() - start
     assert result.returncode != 0
     assert elapsed < 30
+    assert f"injected fault on rank {ranks - 1}" in result.stderr
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_exception_on_one_rank_ends_a_solid_only_run(tmp_path, ranks):
+    start = time.monotonic()
+    result = run_python([SOLID_FAULT, CASES / "mass_spring_7x7.toml", "-o", tmp_path],
+                        ranks=ranks, timeout=30)
+    assert result.returncode != 0
+    assert time.monotonic() - start < 30
     assert f"injected fault on rank {ranks - 1}" in result.stderr
