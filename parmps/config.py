@@ -165,8 +165,10 @@ SCHEMA = {
         "upper": Key("vec2", doc="upper-right corner"),
     }, required=True, doc="the box that holds every particle for the whole run"),
     "particles": Section({
-        "spacing": Key("float", gt=0.0, doc="initial particle spacing l0 [m]"),
-    }, required=True),
+        "spacing": Key("float", None, gt=0.0,
+                       doc="initial particle spacing l0 [m]; needed by any case with fluid "
+                           "or walls, not by a solid-only case"),
+    }),
     "fluid": Section({
         "density": Key("float", 1000.0, gt=0.0, doc="rho [kg/m^3]"),
         "viscosity": Key("float", 1.0e-6, ge=0.0, doc="kinematic viscosity nu [m^2/s]"),
@@ -355,6 +357,11 @@ def validate(raw):
 
 
 def _check_consistency(case):
+    particle_sections = [name for name in ("fluid_block", "tank", "wall_box", "inlet", "outlet")
+                         if case.get(name)]
+    if case["particles"]["spacing"] is None and particle_sections:
+        raise CaseError(f"missing key 'particles.spacing': the case has "
+                        f"[[{particle_sections[0]}]] particles, which need a spacing")
     lower, upper = case["domain"]["lower"], case["domain"]["upper"]
     for axis, label in enumerate("xy"):
         if not upper[axis] > lower[axis]:

@@ -42,6 +42,9 @@ CASES_WITH_ERRORS = {
     "missing section": (BASE.replace("[time]", "[timing]"), "unknown key 'timing'"),
     "syntax error": (BASE + "\n[fluid\n", "not valid TOML"),
     "missing required key": (BASE.replace("end = 2.0\n", ""), "missing key 'time.end'"),
+    "missing spacing with fluid": (BASE.replace("[particles]\nspacing = 0.01\n", ""),
+                                   "missing key 'particles.spacing': the case has "
+                                   "[[fluid_block]] particles"),
 }
 
 
