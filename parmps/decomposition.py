@@ -307,20 +307,7 @@ class SlabDecomposition:
 
     def _migrate_all(self, particles, owner):
         """Some particle jumps more than one slab: one all-to-all by owner."""
-        arrays = _field_arrays(particles)
-        order = np.argsort(owner, kind="stable")
-        buffer = pack(arrays, order)
-        row = buffer.shape[1]
-        send_counts = np.bincount(owner, minlength=self.size).astype(np.int64)
-        recv_counts = np.empty(self.size, np.int64)
-        self.cart.Alltoall(send_counts, recv_counts)
-        received = np.empty((int(recv_counts.sum()), row), np.uint8)
-        send_bytes = send_counts * row
-        recv_bytes = recv_counts * row
-        self.cart.Alltoallv(
-            [buffer, (send_bytes, _displacements(send_bytes)), MPI.BYTE],
-            [received, (recv_bytes, _displacements(recv_bytes)), MPI.BYTE])
-        return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
+        return _send_to_ranks(particles, owner, self.cart)
 
     def _exchange(self, to_left, to_right, counts=None):
         """Send packed rows to both neighbours; returns the rows (from_left, from_right).
@@ -575,7 +562,21 @@ def by_id_blocks(particles, comm):
     span = high - low + 1
     # Block of each id: floor((id - low) * size / span), in exact integer arithmetic.
     destination = ((ids - low) * comm.size // span).astype(np.int64)
-    arrays = _field_arrays(owned)
+    block = _sorted_by_id(_send_to_ranks(owned, destination, comm))
+    count = np.array([block.n_owned], np.int64)
+    offset = np.zeros(1, np.int64)
+    comm.Exscan(count, offset)
+    total = np.zeros(1, np.int64)
+    comm.Allreduce(count, total)
+    return block, int(offset[0]) if comm.rank > 0 else 0, int(total[0])
+
+
+def _send_to_ranks(particles, destination, comm):
+    """Every particle sent to rank ``destination[k]`` in one all-to-all; collective.
+
+    Returns the particles this rank received (owned only, in sender-rank order).
+    """
+    arrays = _field_arrays(particles)
     order = np.argsort(destination, kind="stable")
     buffer = pack(arrays, order)
     row = buffer.shape[1]
@@ -583,15 +584,11 @@ def by_id_blocks(particles, comm):
     recv_counts = np.empty(comm.size, np.int64)
     comm.Alltoall(send_counts, recv_counts)
     received = np.empty((int(recv_counts.sum()), row), np.uint8)
-    comm.Alltoallv([buffer, (send_counts * row, _displacements(send_counts * row)), MPI.BYTE],
-                   [received, (recv_counts * row, _displacements(recv_counts * row)), MPI.BYTE])
-    block = _sorted_by_id(Particles(dict(zip(FIELDS, unpack_new(received, arrays)))))
-    count = np.array([block.n_owned], np.int64)
-    offset = np.zeros(1, np.int64)
-    comm.Exscan(count, offset)
-    total = np.zeros(1, np.int64)
-    comm.Allreduce(count, total)
-    return block, int(offset[0]) if comm.rank > 0 else 0, int(total[0])
+    send_bytes = send_counts * row
+    recv_bytes = recv_counts * row
+    comm.Alltoallv([buffer, (send_bytes, _displacements(send_bytes)), MPI.BYTE],
+                   [received, (recv_bytes, _displacements(recv_bytes)), MPI.BYTE])
+    return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
 
 
 def _imbalance(counts):
