@@ -135,10 +135,12 @@ class Run:
         total_particles = comm.allreduce(self.particles.n_owned)
         particle_steps = 0
         timers = self.fluid.timers
+        # The largest fluid speed; the check after each step measures it for the next.
+        fluid_speed = max_speed(self.particles, comm)
         while self.time < self.end_time * (1 - 1e-12) and (max_steps == 0 or
                                                            self.step_number < max_steps):
             step = self.step_number + 1
-            speed = max_speed(self.particles, comm)
+            speed = fluid_speed
             if self.coupling is not None:
                 speed = max(speed, self.coupling.max_speed())
             dt = choose_dt(case, speed, self.spacing, step)
@@ -163,13 +165,12 @@ class Run:
             self.particles = particles
             self.time += dt
             self.step_number = step
-            self._check(particles, dt, step)
+            fluid_speed = self._check(particles, dt, step)
             if on_step is not None:
                 on_step(self)
             particle_steps += total_particles
             n = particles.n_owned
             fluid = particles.kind[:n] == FLUID
-            speed_after = max_speed(particles, comm)
             kinetic = comm.allreduce(0.5 * case["fluid"]["density"] * self.spacing ** 2 *
                                      float((particles.velocity[:n][fluid] ** 2).sum()))
             n_fluid = comm.allreduce(int(np.count_nonzero(fluid)))
@@ -181,7 +182,7 @@ class Run:
             output.add_diagnostics({**boundary_counts,
                 "step": step, "time": self.time, "dt": dt,
                 "ksp_iterations": stats["ksp_iterations"], "ksp_residual": stats["ksp_residual"],
-                "max_speed": speed_after, "kinetic_energy": kinetic, "n_fluid": n_fluid,
+                "max_speed": fluid_speed, "kinetic_energy": kinetic, "n_fluid": n_fluid,
                 "wall_seconds": now - start,
                 "imbalance": self.decomposition.imbalance(particles)})
             frame_due = self.time >= next_frame * (1 - 1e-9) or self.time >= self.end_time * (1 - 1e-12)
@@ -211,7 +212,7 @@ class Run:
 
     def _check(self, particles, dt, step):
         """Stop loudly on NaN, a blown-up body, a particle leaving the domain or going
-        through a wall, or a Courant breach."""
+        through a wall, or a Courant breach; returns the largest fluid speed."""
         comm = self.comm
         check_finite(particles, comm, step)
         if self.coupling is not None:
@@ -237,3 +238,4 @@ class Run:
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, self.wall_rectangles, self.spacing, comm, step)
+        return speed
