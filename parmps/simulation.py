@@ -2,21 +2,18 @@
 
 import logging
 import math
-import time as wallclock
 
 import numpy as np
 
 from parmps import guards, scene
 from parmps.decomposition import SlabDecomposition
-from parmps.errors import CaseError, RunFailure
+from parmps.errors import RunFailure
 from parmps.fluid import FluidSolver, check_finite, max_speed
 from parmps.output import Output
 from parmps.particles import FLUID, KIND_NAMES
-from parmps.tools.parallel import abort_on_exception
+from parmps.tools.timeloop import Schedule, run_collectively
 
 log = logging.getLogger(__name__)
-
-PROGRESS_SECONDS = 5.0
 
 
 def choose_dt(case, speed, spacing, step):
@@ -109,27 +106,17 @@ class Run:
                 log.info("body %s: %d substeps per step of dt_max", name, count)
         else:
             output = Output(comm, self.directory, self.case_text, extra_diagnostics=extra)
-        complete = False
         try:
-            # An unexpected exception on one rank must abort the job here: the
-            # collective close below would wait for ranks still inside the step.
-            with abort_on_exception(comm, passthrough=(CaseError, RunFailure)):
-                self._loop(output, on_step)
-            complete = True
+            return run_collectively(comm, output, lambda: self._loop(output, on_step))
         finally:
-            output.close(complete)
             self.fluid.pressure_solver.destroy()
-        return output.path
 
     def _loop(self, output, on_step):
         comm = self.comm
         case = self.case
-        interval = case["time"]["output_interval"]
-        max_steps = case["time"]["max_steps"]
+        schedule = Schedule(self.end_time, case["time"]["max_steps"],
+                            case["time"]["output_interval"])
         write_frames = case["output"]["frames"]
-        start = wallclock.perf_counter()
-        last_progress = start
-        next_frame = interval
         if write_frames:
             output.write_frame(0, 0.0, 0.0, self.particles)
         total_particles = comm.allreduce(self.particles.n_owned)
@@ -137,15 +124,12 @@ class Run:
         timers = self.fluid.timers
         # The largest fluid speed; the check after each step measures it for the next.
         fluid_speed = max_speed(self.particles, comm)
-        while self.time < self.end_time * (1 - 1e-12) and (max_steps == 0 or
-                                                           self.step_number < max_steps):
+        while schedule.running(self.time, self.step_number):
             step = self.step_number + 1
             speed = fluid_speed
             if self.coupling is not None:
                 speed = max(speed, self.coupling.max_speed())
-            dt = choose_dt(case, speed, self.spacing, step)
-            if self.time + dt > self.end_time:
-                dt = self.end_time - self.time
+            dt = schedule.clip(self.time, choose_dt(case, speed, self.spacing, step))
             timers.start("halo")
             particles = self.decomposition.migrate(self.particles)
             particles = self.decomposition.rebalance(particles, step)
@@ -174,7 +158,6 @@ class Run:
             kinetic = comm.allreduce(0.5 * case["fluid"]["density"] * self.spacing ** 2 *
                                      float((particles.velocity[:n][fluid] ** 2).sum()))
             n_fluid = comm.allreduce(int(np.count_nonzero(fluid)))
-            now = wallclock.perf_counter()
             if self.coupling is not None:
                 output.add_solid_row(self.time, self.coupling.extra_rows(particles))
             boundary_counts = ({} if self.open_boundaries is None
@@ -183,26 +166,20 @@ class Run:
                 "step": step, "time": self.time, "dt": dt,
                 "ksp_iterations": stats["ksp_iterations"], "ksp_residual": stats["ksp_residual"],
                 "max_speed": fluid_speed, "kinetic_energy": kinetic, "n_fluid": n_fluid,
-                "wall_seconds": now - start,
+                "wall_seconds": schedule.elapsed(),
                 "imbalance": self.decomposition.imbalance(particles)})
-            frame_due = self.time >= next_frame * (1 - 1e-9) or self.time >= self.end_time * (1 - 1e-12)
-            if frame_due:
+            if schedule.frame_due(self.time):
                 timers.start("output")
                 if write_frames:
                     output.write_frame(step, self.time, dt, particles)
                 else:
                     output.flush_diagnostics()
                 timers.stop()
-                while next_frame <= self.time * (1 + 1e-9):
-                    next_frame += interval
-            if now - last_progress >= PROGRESS_SECONDS:
-                last_progress = now
-                elapsed = now - start
-                rate = particle_steps / elapsed
-                left = elapsed / self.time * (self.end_time - self.time) if self.time > 0 else 0
+            if schedule.progress_due():
                 log.info("step %d  t = %.4g s  dt = %.3g s  ksp %d its  %.3g particle-steps/s  "
-                         "%.0f s left", step, self.time, dt, stats["ksp_iterations"], rate, left)
-        elapsed = wallclock.perf_counter() - start
+                         "%.0f s left", step, self.time, dt, stats["ksp_iterations"],
+                         particle_steps / schedule.elapsed(), schedule.seconds_left(self.time))
+        elapsed = schedule.elapsed()
         self.elapsed = elapsed
         self.particle_steps = particle_steps
         log.info("done: %d steps to t = %.4g s in %.1f s (%.3g particle-steps/s, %.2f us per "

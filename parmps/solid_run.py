@@ -17,20 +17,18 @@ the nodes as its particles and writes the data.
 import logging
 import math
 import os
-import time as wallclock
 
 import numpy as np
 
 from parmps import guards
-from parmps.errors import CaseError, RunFailure
+from parmps.errors import RunFailure
 from parmps.output import Output
 from parmps.particles import SOLID, Particles
 from parmps.solid import SolidSystem
-from parmps.tools.parallel import abort_on_exception
+from parmps.tools.timeloop import Schedule, run_collectively
 
 log = logging.getLogger(__name__)
 
-PROGRESS_SECONDS = 5.0
 SOLID_SERIES = {"time": (), "volume_error": (), "fluid_force": (2,), "centroid": (2,)}
 GEOMETRY_SECTIONS = ("fluid_block", "tank", "wall_box")
 
@@ -209,36 +207,23 @@ class SolidRun:
 
     def execute(self):
         output = SolidOutput(self.comm, self.directory, self.case_text, self.system)
-        complete = False
-        try:
-            # As in simulation.Run: an unexpected exception on one rank aborts the
-            # job, since the collective close would wait for the other ranks.
-            with abort_on_exception(self.comm, passthrough=(CaseError, RunFailure)):
-                self._loop(output)
-            complete = True
-        finally:
-            output.close(complete)
-        return output.path
+        return run_collectively(self.comm, output, lambda: self._loop(output))
 
     def _loop(self, output):
         case = self.case
-        interval = case["time"]["output_interval"]
-        max_steps = case["time"]["max_steps"]
+        schedule = Schedule(self.end_time, case["time"]["max_steps"],
+                            case["time"]["output_interval"])
         write_frames = case["output"]["frames"]
         for name, count in self.system.substep_counts(self.dt).items():
             log.info("body %s: %d substeps of %.3g s per step of %.3g s", name, count,
                      self.dt / count, self.dt)
-        start = wallclock.perf_counter()
-        last_progress = start
-        next_frame = interval
         if write_frames:
             output.write_frame(0, 0.0, 0.0, self.particles())
         lower = np.asarray(case["domain"]["lower"])
         upper = np.asarray(case["domain"]["upper"])
-        while self.time < self.end_time * (1 - 1e-12) and (max_steps == 0 or
-                                                           self.step_number < max_steps):
+        while schedule.running(self.time, self.step_number):
             step = self.step_number + 1
-            dt = min(self.dt, self.end_time - self.time)
+            dt = schedule.clip(self.time, self.dt)
             try:
                 self.system.advance(self.time, dt)
             except RunFailure as exc:
@@ -247,29 +232,25 @@ class SolidRun:
             self.time += dt
             self.step_number = step
             self._check(step, lower, upper)
-            now = wallclock.perf_counter()
             speed = max((float(np.sqrt((body.velocity ** 2).sum(axis=1)).max())
                          for body in self.system.bodies), default=0.0)
             kinetic = sum(body.energy()[0] for body in self.system.bodies)
             output.add_diagnostics({"step": step, "time": self.time, "dt": dt,
                                     "ksp_iterations": 0, "ksp_residual": math.nan,
                                     "max_speed": speed, "kinetic_energy": kinetic,
-                                    "n_fluid": 0, "wall_seconds": now - start})
+                                    "n_fluid": 0, "wall_seconds": schedule.elapsed()})
             output.add_solid_row(self.time)
-            if self.time >= next_frame * (1 - 1e-9) or self.time >= self.end_time * (1 - 1e-12):
+            if schedule.frame_due(self.time):
                 if write_frames:
                     output.write_frame(step, self.time, dt, self.particles())
                 else:
                     output.flush_diagnostics()
-                while next_frame <= self.time * (1 + 1e-9):
-                    next_frame += interval
-            if now - last_progress >= PROGRESS_SECONDS:
-                last_progress = now
+            if schedule.progress_due():
                 log.info("step %d  t = %.4g s  %s", step, self.time, "  ".join(
                     f"{name}: volume error {values['volume_error']:.3e}"
                     for name, values in self.system.diagnostics().items()))
         output.flush_diagnostics()
-        self.elapsed = wallclock.perf_counter() - start
+        self.elapsed = schedule.elapsed()
         log.info("done: %d steps to t = %.4g s in %.1f s; %s", self.step_number, self.time,
                  self.elapsed, ", ".join(f"{name} volume error {v['volume_error']:.3e}"
                                          for name, v in self.system.diagnostics().items()))
