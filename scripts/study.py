@@ -613,7 +613,7 @@ def write_report(study, docs, command):
         figure, axes = plt.subplots(1, 2, figsize=(9, 3.8))
         add("## Dam break: surge front against Martin & Moyce (1952), error against wall time\n")
         add("RMS relative error of the front Z = x/a for T <= 3, unshifted and with the best "
-            "constant delay of the experiment (its gate), against the loop wall time; "
+            "constant delay of the experiment's start, against the loop wall time; "
             "run to T = 3.4.\n")
         add("| ranks | l0 | steps | wall [s] | RMS error | RMS error, delayed | delay T |")
         add("| --- | --- | --- | --- | --- | --- | --- |")

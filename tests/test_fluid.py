@@ -130,5 +130,5 @@ def test_dam_break_front_against_martin_moyce(tmp_path):
 
 
 # Measured 0.13 at l0 = a/20 and 0.14 at a/40 (see README): the simulated front
-# leads the experiment early on, where the gate was still being lifted.
+# leads the experiment most early on (T < 2), however fine l0 is.
 DAM_BREAK_TOLERANCE = 0.15
