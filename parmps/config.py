@@ -158,6 +158,19 @@ def _validate_table(name, keys, raw):
 
 VEC_ZERO = (0.0, 0.0)
 
+# Prescribed motion of a tank or wall box (parmps.walls): its wall and dummy
+# particles translate together at `velocity` while move_start <= t < move_end.
+# "Never stops" is the default move_end, infinity; a case file cannot write
+# it (numbers must be finite), it leaves the key out.
+MOTION_KEYS = {
+    "velocity": Key("vec2", [0.0, 0.0],
+                    doc="constant velocity of the whole geometry, walls and dummies [m/s]; "
+                        "[0, 0]: fixed"),
+    "move_start": Key("float", 0.0, ge=0.0, doc="time the motion starts [s]"),
+    "move_end": Key("float", math.inf, gt=0.0,
+                    doc="time the motion stops [s], > move_start; default: never stops"),
+}
+
 SCHEMA = {
     "title": None,  # a free string, checked below
     "domain": Section({
@@ -227,12 +240,16 @@ SCHEMA = {
         "wall_layers": Key("int", 2, ge=1, le=10),
         "dummy_layers": Key("int", 2, ge=0, le=10),
         "open_top": Key("bool", True),
-    }, many=True, doc="walls around a rectangle, with dummy layers behind them"),
+        **MOTION_KEYS,
+    }, many=True, doc="walls around a rectangle, with dummy layers behind them; they may "
+                      "translate at a constant velocity (see MOTION_KEYS)"),
     "wall_box": Section({
         "lower": Key("vec2"),
         "upper": Key("vec2"),
         "wall_layers": Key("int", 2, ge=1, le=10),
-    }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside"),
+        **MOTION_KEYS,
+    }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside; "
+                      "it may translate at a constant velocity (see MOTION_KEYS)"),
     "solid": Section({
         "substep": Key("float", 0.0, ge=0.0,
                        doc="fixed solid substep [s]; 0 chooses it from the stiffest node"),
@@ -373,6 +390,11 @@ def _check_consistency(case):
                 if not item["upper"][axis] > item["lower"][axis]:
                     raise CaseError(f"{kind}[{k}].upper.{label} ({item['upper'][axis]}) must "
                                     f"exceed {kind}[{k}].lower.{label} ({item['lower'][axis]})")
+    for kind in ("tank", "wall_box"):
+        for k, item in enumerate(case[kind]):
+            if not item["move_end"] > item["move_start"]:
+                raise CaseError(f"{kind}[{k}].move_end ({item['move_end']}) must exceed "
+                                f"{kind}[{k}].move_start ({item['move_start']})")
     mps = case["mps"]
     if mps["re_laplacian"] < mps["re_number_density"]:
         raise CaseError(f"mps.re_laplacian ({mps['re_laplacian']}) must be >= "
@@ -380,6 +402,17 @@ def _check_consistency(case):
     time = case["time"]
     if time["fixed_dt"] > 0 and time["fixed_dt"] > time["end"]:
         raise CaseError(f"time.fixed_dt ({time['fixed_dt']}) exceeds time.end ({time['end']})")
+    if time["fixed_dt"] > 0:
+        # A wall's speed is known now: a fixed step too long for it is a case error.
+        for kind in ("tank", "wall_box"):
+            for k, item in enumerate(case[kind]):
+                speed = math.hypot(*item["velocity"])
+                if speed * time["fixed_dt"] > time["cfl"] * case["particles"]["spacing"]:
+                    raise CaseError(
+                        f"{kind}[{k}].velocity: a wall moving at {speed:g} m/s needs "
+                        f"dt <= time.cfl x spacing / speed = "
+                        f"{time['cfl'] * case['particles']['spacing'] / speed:.4g} s, but "
+                        f"time.fixed_dt is {time['fixed_dt']:g} s")
     if case["body"]:
         # Bodies are small: building them is the cheapest complete check.
         from parmps.bodies import build_bodies

@@ -26,6 +26,7 @@ import numpy as np
 
 from parmps.errors import RunFailure
 from parmps.particles import FLUID
+from parmps.walls import travel
 
 # Depth behind a wall surface, in spacings, past which a fluid particle has
 # leaked: half a spacing puts its centre on the first wall layer's centre line.
@@ -40,16 +41,18 @@ VOLUME_ERROR_LIMIT = 0.1
 STRETCH_LIMIT = 20.0
 
 
-def wall_rectangles(case):
-    """The wall material of the case as rectangles ``(lower, upper, name)``, in metres.
+def wall_rectangles(case, time=0.0):
+    """The wall material at ``time`` as rectangles ``(lower, upper, name)``, in metres.
 
     A tank gives its left, right and bottom walls (and top when closed), each
     as thick as its wall and dummy layers; a wall box is its own rectangle.
+    Moving tanks and boxes (parmps.walls) are where their motion has taken them.
     """
     spacing = case["particles"]["spacing"]
     rectangles = []
     for k, spec in enumerate(case.get("tank", ())):
-        (x0, y0), (x1, y1) = spec["lower"], spec["upper"]
+        shift = travel(spec, time)
+        (x0, y0), (x1, y1) = np.add(spec["lower"], shift), np.add(spec["upper"], shift)
         thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
         top = y1 if spec["open_top"] else y1 + thick
         name = f"tank[{k}]"
@@ -59,7 +62,9 @@ def wall_rectangles(case):
         if not spec["open_top"]:
             rectangles.append(((x0 - thick, y1), (x1 + thick, y1 + thick), f"{name} top"))
     for k, spec in enumerate(case.get("wall_box", ())):
-        rectangles.append((tuple(spec["lower"]), tuple(spec["upper"]), f"wall_box[{k}]"))
+        shift = travel(spec, time)
+        rectangles.append((tuple(np.add(spec["lower"], shift)),
+                           tuple(np.add(spec["upper"], shift)), f"wall_box[{k}]"))
     return rectangles
 
 

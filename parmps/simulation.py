@@ -12,6 +12,7 @@ from parmps.fluid import FluidSolver, check_finite, max_speed
 from parmps.output import Output
 from parmps.particles import FLUID, KIND_NAMES
 from parmps.tools.timeloop import Schedule, run_collectively
+from parmps.walls import MovingWalls
 
 log = logging.getLogger(__name__)
 
@@ -26,7 +27,7 @@ def choose_dt(case, speed, spacing, step):
         if dt > courant_limit:
             raise RunFailure(
                 f"step {step}: the fixed time.fixed_dt = {dt:g} s breaks the Courant limit: "
-                f"max fluid speed {speed:.4g} m/s needs dt <= {courant_limit:.4g} s "
+                f"max speed {speed:.4g} m/s needs dt <= {courant_limit:.4g} s "
                 f"(time.cfl = {settings['cfl']:g}); lower time.fixed_dt or set it to 0 "
                 f"for adaptive steps")
         return dt
@@ -60,7 +61,13 @@ class Run:
         if case["inlet"] or case["outlet"]:
             from parmps.inflow import OpenBoundaries
             self.open_boundaries = OpenBoundaries(case, comm)
-        global_scene, _, _ = scene.build(case, bodies, self.open_boundaries)
+        global_scene, origin, sources = scene.build(case, bodies, self.open_boundaries)
+        # Walls with prescribed motion, when the case has any; checked against the
+        # domain up to the end time here, on every rank alike, like the scene.
+        self.moving_walls = MovingWalls.from_scene(case, global_scene, origin, sources)
+        if self.moving_walls is not None:
+            self.moving_walls.check_domain(case, global_scene, self.end_time)
+            self.moving_walls.set_velocity(global_scene, 0.0)
         self.counts = {KIND_NAMES[k]: int(np.count_nonzero(global_scene.kind == k))
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
         self.particles = self.decomposition.distribute(global_scene)
@@ -74,7 +81,8 @@ class Run:
         """What --check prints: counts by kind, reference values, first dt, memory."""
         fluid = self.fluid
         total = sum(self.counts.values())
-        dt0 = choose_dt(self.case, max_speed(self.particles, self.comm), self.spacing, 0)
+        dt0 = choose_dt(self.case, self._speed(max_speed(self.particles, self.comm)),
+                        self.spacing, 0)
         # Pair lists dominate memory: ~(pi re^2 / l0^2) neighbours, 8+8 bytes each,
         # plus the pair geometry (3 doubles) and the matrix (12 bytes per entry).
         neighbours = math.pi * (fluid.search_radius / self.spacing) ** 2
@@ -85,6 +93,17 @@ class Run:
             "initial_dt": dt0, "memory_estimate_mb": memory / 2 ** 20,
             "ranks": self.comm.size,
         }
+
+    def _speed(self, fluid_speed):
+        """The speed the next step's dt must respect: fluid, bodies and moving walls."""
+        speed = fluid_speed
+        if self.coupling is not None:
+            speed = max(speed, self.coupling.max_speed())
+        if self.moving_walls is not None:
+            settings = self.case["time"]
+            horizon = settings["fixed_dt"] or settings["dt_max"]
+            speed = max(speed, self.moving_walls.speed(self.time, self.time + horizon))
+        return speed
 
     def execute(self, on_step=None):
         """Run to the end time; ``on_step(run)`` is called after every step (benchmarks)."""
@@ -126,10 +145,11 @@ class Run:
         fluid_speed = max_speed(self.particles, comm)
         while schedule.running(self.time, self.step_number):
             step = self.step_number + 1
-            speed = fluid_speed
-            if self.coupling is not None:
-                speed = max(speed, self.coupling.max_speed())
-            dt = schedule.clip(self.time, choose_dt(case, speed, self.spacing, step))
+            dt = schedule.clip(self.time,
+                               choose_dt(case, self._speed(fluid_speed), self.spacing, step))
+            if self.moving_walls is not None:
+                # Before migration: moved wall particles then change owner like any other.
+                self.moving_walls.advance(self.particles, self.time, dt)
             timers.start("halo")
             particles = self.decomposition.migrate(self.particles)
             particles = self.decomposition.rebalance(particles, step)
@@ -204,6 +224,11 @@ class Run:
         escaped = [item for item in comm.allgather(local) if item is not None]
         if escaped:
             pid, x, y = min(escaped)
+            wall = None if self.moving_walls is None else self.moving_walls.name_of(pid)
+            if wall is not None:
+                raise RunFailure(f"step {step}: particle {pid} of the moving {wall} left the "
+                                 f"domain at ({x:.4g}, {y:.4g}); stop it earlier "
+                                 f"({wall}.move_end) or enlarge the domain")
             raise RunFailure(f"step {step}: particle {pid} left the domain at ({x:.4g}, {y:.4g}) "
                              f"(through a wall, or the domain is too small)")
         speed = max_speed(particles, comm)
@@ -214,5 +239,7 @@ class Run:
                              f"spacing per step; the run is unstable")
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
-        guards.check_wall_penetration(particles, self.wall_rectangles, self.spacing, comm, step)
+        rectangles = self.wall_rectangles if self.moving_walls is None else \
+            guards.wall_rectangles(self.case, self.time)
+        guards.check_wall_penetration(particles, rectangles, self.spacing, comm, step)
         return speed

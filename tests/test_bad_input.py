@@ -47,6 +47,44 @@ CASES_WITH_ERRORS = {
                                    "[[fluid_block]] particles"),
 }
 
+# Walls with prescribed motion (parmps.walls): the tank of BASE, or a box above its water.
+MOVING_TANK = "dummy_layers = 2\n"
+BOX = "\n[[wall_box]]\nlower = [0.05, 0.22]\nupper = [0.15, 0.28]\n"
+
+
+def _tank_with(keys):
+    return BASE.replace(MOVING_TANK, MOVING_TANK + keys + "\n")
+
+
+CASES_WITH_ERRORS.update({
+    "wall velocity not an array": (_tank_with('velocity = "fast"'),
+                                   "tank[0].velocity must be an array, got string"),
+    "wall velocity of 3 components": (_tank_with("velocity = [0.0, 0.1, 0.0]"),
+                                      "tank[0].velocity must have 2 components"),
+    "box velocity component not a number": (BASE + BOX + 'velocity = [0.1, "up"]\n',
+                                            "wall_box[0].velocity[1] must be a number"),
+    "negative move_start": (_tank_with("move_start = -0.1"),
+                            "tank[0].move_start must be >= 0.0, got -0.1"),
+    "move_start not a number": (BASE + BOX + 'move_start = "now"\n',
+                                "wall_box[0].move_start must be a number, got string"),
+    "move_end not positive": (BASE + BOX + "move_end = 0.0\n",
+                              "wall_box[0].move_end must be > 0.0, got 0.0"),
+    "move_end not after move_start": (BASE + BOX + "move_start = 0.5\nmove_end = 0.5\n",
+                                      "wall_box[0].move_end (0.5) must exceed "
+                                      "wall_box[0].move_start (0.5)"),
+    "misspelt motion key": (_tank_with("move_stop = 1.0"),
+                            "unknown key 'tank[0].move_stop' (did you mean 'move_start'?)"),
+    "fixed dt too long for a wall": (
+        BASE.replace("dt_max = 1.0e-3", "fixed_dt = 5.0e-3") + BOX + "velocity = [0.0, 1.0]\n",
+        "wall_box[0].velocity: a wall moving at 1 m/s needs dt <= time.cfl x spacing / speed "
+        "= 0.002 s, but time.fixed_dt is 0.005 s"),
+    "moving wall leaving the domain": (
+        _tank_with("velocity = [0.0, 0.1]"),
+        # The tank's top wall particles (y = 0.295) reach the domain's y = 0.36 at 0.65 s.
+        "tank[0] moves out of the domain: at tank[0].velocity = [0, 0.1] m/s its particles "
+        "leave [-0.06, -0.06]-[0.26, 0.36] at t = 0.65 s, before the end time (2 s)"),
+})
+
 
 @pytest.mark.parametrize("label", sorted(CASES_WITH_ERRORS))
 def test_bad_case_exits_2_with_one_line(tmp_path, label):

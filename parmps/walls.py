@@ -1,0 +1,136 @@
+"""Walls with prescribed motion: tanks and wall boxes translating at a constant velocity.
+
+A ``[[tank]]`` or ``[[wall_box]]`` with a non-zero ``velocity`` moves, its wall
+and dummy particles together, while ``move_start <= t < move_end`` and rests
+otherwise. Its displacement is a function of the time alone,
+``d(t) = v (clip(t, move_start, move_end) - move_start)``, so where a wall is
+does not depend on the step sizes: each step adds ``d(t + dt) - d(t)``, which
+telescopes to ``d(t)`` up to round-off.
+
+Which particles. :func:`parmps.scene.build` numbers particles in the order of
+the case's geometry entries, so each tank or wall box owns one contiguous block
+of global ids. Ids never change, so the block finds the wall's particles on any
+rank after any migration or rebalance without a per-particle field to carry.
+
+When. The time loop calls :meth:`MovingWalls.advance` at the start of each
+step, before migration and the halo: the whole fluid step (pair search, number
+density, pressure) then sees the walls where they are at the end of the step,
+as it sees the fluid at its predicted positions (the choice
+:meth:`parmps.coupling.SolidCoupling.predict` makes for solid nodes). Moving
+before migration lets the decomposition treat wall particles like any other.
+
+Velocity. A moving wall's particles carry the mean velocity of the step they
+are in, ``(d(t + dt) - d(t)) / dt``: the wall velocity the viscous term and the
+collision model see, consistent with the displacement. It is ``v`` in a step
+inside the motion window, 0 in a step outside it (a stopped wall is at rest),
+and a fraction of ``v`` in a step that straddles ``move_start`` or
+``move_end``. Before the first step the particles carry the velocity at t = 0.
+"""
+
+import math
+
+import numpy as np
+
+from parmps.errors import CaseError
+
+SECTIONS = ("tank", "wall_box")
+
+
+def travel(spec, time):
+    """Displacement d(time) [m] of a tank or wall box entry from its position at t = 0."""
+    start, end = spec["move_start"], spec["move_end"]
+    moved = min(max(time, start), end) - start
+    return np.asarray(spec["velocity"], dtype=float) * moved
+
+
+def moving_entries(case):
+    """``(name, spec)`` of every tank and wall box with a non-zero velocity."""
+    return [(f"{section}[{k}]", spec) for section in SECTIONS
+            for k, spec in enumerate(case.get(section, ())) if any(spec["velocity"])]
+
+
+class MovingWalls:
+    """The moving tanks and wall boxes of a case, each a block of global ids."""
+
+    def __init__(self, case, ids, origin, sources):
+        """``ids``, ``origin`` and ``sources``: the global scene of :func:`scene.build`."""
+        self.walls = []
+        for name, spec in moving_entries(case):
+            members = ids[origin == sources.index(name)]
+            low, high = int(members.min()), int(members.max()) + 1
+            if high - low != len(members):
+                raise AssertionError(f"{name}: its particle ids are not one block")
+            self.walls.append((name, spec, low, high))
+
+    @classmethod
+    def from_scene(cls, case, particles, origin, sources):
+        """The moving walls of the case, or None when every wall is fixed."""
+        if not moving_entries(case):
+            return None
+        return cls(case, particles.id, origin, sources)
+
+    def speed(self, time, until):
+        """Largest wall speed at any time in [time, until) (the same on every rank)."""
+        return max((math.hypot(*spec["velocity"]) for _, spec, _, _ in self.walls
+                    if spec["move_start"] < until and time < spec["move_end"]), default=0.0)
+
+    def _members(self, particles, low, high):
+        ids = particles.id[:particles.n_owned]
+        return (ids >= low) & (ids < high)
+
+    def set_velocity(self, particles, time):
+        """Give the owned particles of each moving wall its velocity at ``time``."""
+        n = particles.n_owned
+        for _, spec, low, high in self.walls:
+            moving = spec["move_start"] <= time < spec["move_end"]
+            particles.velocity[:n][self._members(particles, low, high)] = \
+                spec["velocity"] if moving else (0.0, 0.0)
+
+    def advance(self, particles, time, dt):
+        """Move the owned particles of each wall from d(time) to d(time + dt), in place.
+
+        Ghosts are left alone: the time loop calls this before migration, which drops them.
+        """
+        n = particles.n_owned
+        for _, spec, low, high in self.walls:
+            # Every rank computes the same shift, so a particle ends bit-identical
+            # whichever rank owns it.
+            shift = travel(spec, time + dt) - travel(spec, time)
+            members = self._members(particles, low, high)
+            particles.position[:n][members] += shift
+            particles.velocity[:n][members] = shift / dt
+
+    def name_of(self, particle_id):
+        """The moving wall a particle belongs to, or None."""
+        for name, _, low, high in self.walls:
+            if low <= particle_id < high:
+                return name
+        return None
+
+    def check_domain(self, case, particles, end_time):
+        """Refuse a wall that would leave the domain before ``end_time`` (CaseError).
+
+        ``particles``: the global scene at t = 0. The motion is a straight line,
+        so the wall leaves the box, if at all, where its particles' bounding box
+        first touches a side.
+        """
+        lower = np.asarray(case["domain"]["lower"], dtype=float)
+        upper = np.asarray(case["domain"]["upper"], dtype=float)
+        for name, spec, low, high in self.walls:
+            position = particles.position[(particles.id >= low) & (particles.id < high)]
+            first, last = position.min(axis=0), position.max(axis=0)
+            velocity = np.asarray(spec["velocity"], dtype=float)
+            room = np.where(velocity > 0, upper - last, first - lower)
+            with np.errstate(divide="ignore"):
+                allowed = np.where(velocity != 0, room / np.abs(velocity), math.inf)
+            duration = min(end_time, spec["move_end"]) - spec["move_start"]
+            if duration > allowed.min() * (1 + 1e-12):
+                leave = spec["move_start"] + float(allowed.min())
+                stop = min(end_time, spec["move_end"])
+                until = "the end time" if stop == end_time else f"{name}.move_end"
+                raise CaseError(
+                    f"{name} moves out of the domain: at {name}.velocity = "
+                    f"[{velocity[0]:g}, {velocity[1]:g}] m/s its particles leave "
+                    f"[{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, {upper[1]:g}] at "
+                    f"t = {leave:.6g} s, before {until} ({stop:g} s); stop it earlier "
+                    f"({name}.move_end) or enlarge domain.lower/domain.upper")
