@@ -206,6 +206,14 @@ SCHEMA = {
                                 doc="gamma of the density term in the mixed source"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True),
+        "gradient_correction": Key("bool", False,
+                                   doc="multiply the pressure gradient by the inverse of its "
+                                       "moment matrix (Khayyer & Gotoh 2011), which corrects its "
+                                       "normalisation on a disordered arrangement"),
+        "gradient_correction_limit": Key("float", 0.7, gt=0.0, le=1.0,
+                                         doc="rows whose moment matrix (the identity on the "
+                                             "full lattice) has an eigenvalue below this keep "
+                                             "the plain gradient"),
         "collision": Key("bool", True),
         "collision_distance": Key("float", 0.5, gt=0.0, lt=1.0, doc="in l0"),
         "restitution": Key("float", 0.2, ge=0.0, le=1.0),

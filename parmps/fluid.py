@@ -63,6 +63,8 @@ class FluidSolver:
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
         self.relaxation = mps["relaxation"]
+        self.gradient_correction = mps["gradient_correction"]
+        self.gradient_correction_limit = mps["gradient_correction_limit"]
         self.source_term = mps["source_term"]
         self.mixed_relaxation = mps["mixed_relaxation"]
         self.compressibility = mps["compressibility"]
@@ -179,6 +181,10 @@ class FluidSolver:
         timers.start("operators")
         pressure_gradient = (operators.DIMENSION / self.n0) * kernels.pressure_gradient_sum(
             indptr, cols, position_star, pressure, has_pressure, self.re_number_density, n)
+        if self.gradient_correction:
+            kernels.correct_gradient(indptr, cols, position_star, has_pressure,
+                                     self.re_number_density, operators.DIMENSION / self.n0,
+                                     pressure_gradient, self.gradient_correction_limit)
         correction = pressure_gradient[moving] / self.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction

@@ -120,6 +120,56 @@ def pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radius
 
 
 @numba.njit(cache=True)
+def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradient,
+                     min_eigenvalue):
+    """Apply the corrective matrix to MPS pressure gradients, in place.
+
+    ``gradient`` holds d/n0 sum_j (P_j - Pmin_i) r_ij w / r^2 per row and
+    ``scale`` is d/n0. With A_i = d/n0 sum_j r_ij (x) r_ij w / r^2 over the same
+    neighbours (those that carry a pressure), which is the identity on the full
+    initial lattice, the row becomes A_i^-1 times itself (Khayyer & Gotoh 2011's
+    gradient correction): exact for a linear field on any particle arrangement
+    for the sum over P_j - P_i; the Pmin shift's part (P_i - Pmin_i) d/n0
+    sum_j r_ij w / r^2 is only rescaled. Rows whose A_i has an eigenvalue below ``min_eigenvalue`` (a
+    truncated neighbourhood at a free surface or in a splash) are left as they
+    are. Returns how many rows were corrected.
+    """
+    n_rows = gradient.shape[0]
+    corrected = 0
+    for i in range(n_rows):
+        xi, yi = position[i, 0], position[i, 1]
+        axx = 0.0
+        axy = 0.0
+        ayy = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not has_pressure[j]:
+                continue
+            dx = position[j, 0] - xi
+            dy = position[j, 1] - yi
+            r2 = dx * dx + dy * dy
+            w = _weight(np.sqrt(r2), radius)
+            if w > 0.0:
+                axx += dx * dx * w / r2
+                axy += dx * dy * w / r2
+                ayy += dy * dy * w / r2
+        axx *= scale
+        axy *= scale
+        ayy *= scale
+        trace = axx + ayy
+        det = axx * ayy - axy * axy
+        smallest = 0.5 * trace - np.sqrt(max(0.25 * trace * trace - det, 0.0))
+        if smallest < min_eigenvalue:
+            continue
+        gx = gradient[i, 0]
+        gy = gradient[i, 1]
+        gradient[i, 0] = (ayy * gx - axy * gy) / det
+        gradient[i, 1] = (axx * gy - axy * gx) / det
+        corrected += 1
+    return corrected
+
+
+@numba.njit(cache=True)
 def collision_change(indptr, cols, position, velocity, moving, distance_limit, restitution,
                      n_rows):
     """Velocity changes of moving particles from collisions closer than ``distance_limit``.

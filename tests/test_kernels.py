@@ -62,6 +62,34 @@ def test_pressure_gradient(scene):
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-6)
 
 
+def test_corrected_gradient_is_exact_for_a_linear_field(scene):
+    position, _, _, is_dummy, n, indptr, cols, _ = scene
+    radius = 2.1 * SPACING
+    n0, _ = operators.reference_values(SPACING, radius)
+    slope = np.array([3.0e3, -9.81e3])
+    pressure = 500.0 + position @ slope
+    include = ~is_dummy
+    pairs = scene[7]
+    # The sums with P_i in place of Pmin_i: the correction makes these exact (the
+    # Pmin shift adds (P_i - Pmin_i) sum_j r_ij w / r^2, which it only rescales).
+    gradient = operators.gradient(pairs, pairs.weight(radius), pressure, n, n0,
+                                  pressure[:n], include)
+    plain = gradient.copy()
+    corrected = kernels.correct_gradient(indptr, cols, position, include, radius,
+                                         operators.DIMENSION / n0, gradient, 0.7)
+    # Interior rows (a full neighbourhood of pressure-carrying particles) are corrected
+    # and exact; the jittered lattice leaves the plain sums off by a few percent.
+    x, y = position[:n, 0], position[:n, 1]
+    interior = (x > 3 * SPACING) & (x < 26 * SPACING) & (y > 5 * SPACING) & (y < 16 * SPACING)
+    assert corrected >= np.count_nonzero(interior)
+    np.testing.assert_allclose(gradient[interior], np.broadcast_to(slope, (interior.sum(), 2)),
+                               rtol=1e-9)
+    assert np.abs(plain[interior] - slope).max() > 1e-3 * np.abs(slope).max()
+    # A row with a truncated neighbourhood (the lattice's corner) keeps the plain sum.
+    corner = np.argmin(x + y)
+    np.testing.assert_array_equal(gradient[corner], plain[corner])
+
+
 def test_collisions_conserve_momentum_between_moving_particles(scene):
     position, velocity, _, _, n, indptr, cols, _ = scene
     # Squeeze the lattice so many pairs are closer than the collision distance.
