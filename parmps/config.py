@@ -190,7 +190,7 @@ SCHEMA = {
         "gravity": Key("vec2", [0.0, -9.81], doc="[m/s^2]"),
     }),
     "mps": Section({
-        "re_number_density": Key("float", 2.1, gt=1.0, le=5.0,
+        "re_number_density": Key("float", 2.3, gt=1.0, le=5.0,
                                  doc="radius for number density and gradient, in l0"),
         "re_laplacian": Key("float", 3.1, gt=1.0, le=5.0, doc="radius for the Laplacian, in l0"),
         "surface_threshold": Key("float", 0.97, gt=0.0, lt=1.0,

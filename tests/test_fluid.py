@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import analysis
+from parmps import analysis, pressure
 from parmps.output import DIAGNOSTICS, FRAME_FIELDS
 
 # The dam break at a coarse resolution the test budget allows (a = 0.2 m, l0 = a/20).
@@ -23,7 +23,9 @@ def test_check_prints_counts_reference_values_dt_and_memory(tmp_path):
     assert summary["particles"]["fluid"] == 40 * 80
     assert summary["particles"]["total"] == sum(v for k, v in summary["particles"].items()
                                                 if k != "total")
-    assert summary["n0"] == pytest.approx(6.5397, rel=1e-4)
+    # re = 2.3 l0 by hand: 4 neighbours at l0, 4 at sqrt(2) l0, 4 at 2 l0, 8 at sqrt(5) l0.
+    n0 = 4 * (2.3 - 1) + 4 * (2.3 / 2 ** 0.5 - 1) + 4 * (2.3 / 2 - 1) + 8 * (2.3 / 5 ** 0.5 - 1)
+    assert summary["n0"] == pytest.approx(n0, rel=1e-12)
     assert summary["lambda0"] > 0 and summary["initial_dt"] == pytest.approx(1e-3)
     assert summary["memory_estimate_mb"] > 0
     assert not (tmp_path / "out").exists()
@@ -32,7 +34,10 @@ def test_check_prints_counts_reference_values_dt_and_memory(tmp_path):
 @pytest.fixture(scope="module")
 def hydrostatic_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("hydrostatic")
-    result = run_parmps([CASES / "hydrostatic.toml", "-o", out, "--end-time", "1.0"],
+    # 2 s, averaged after 0.5 s: the column is still settling before that (the
+    # 0.3-1 s mean sits 1.7 % low), and a longer window averages out the
+    # whole-column pressure swings. Measured: -1.0 % (RMS 1.1 %) here, +0.7 % on 2 ranks.
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", out, "--end-time", "2.0"],
                         timeout=300)
     assert result.returncode == 0, result.stderr
     return out, result
@@ -41,7 +46,7 @@ def hydrostatic_run(tmp_path_factory):
 def test_hydrostatic_pressure_within_two_percent(hydrostatic_run):
     out, _ = hydrostatic_run
     bottom, rms = analysis.hydrostatic_error(out / "result.h5", depth=0.2, density=1000.0,
-                                             gravity=9.81, settle_time=0.3, spacing=0.01)
+                                             gravity=9.81, settle_time=0.5, spacing=0.01)
     assert abs(bottom) < 0.02, bottom
     assert rms < 0.02, rms
     # The tank's inner walls are at x = 0 and 0.2, its floor at y = 0.
@@ -102,6 +107,19 @@ def test_case_options_apply_and_command_line_wins(tmp_path):
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path / "b", "--end-time", "0.003",
                          "-pressure_ksp_max_it", "500"] + failing, timeout=120)
     assert result.returncode == 0, result.stderr
+
+
+def test_code_defaults_yield_to_case_options_and_the_command_line():
+    gamg = {"pc_type": "gamg", "options": {}}
+    assert pressure.option_values(gamg, lambda name: False) == pressure.CODE_DEFAULTS["gamg"]
+    case = dict(gamg, options={"-mg_levels_ksp_max_it": 2, "pc_gamg_threshold": 0.1,
+                               "ksp_monitor": True})
+    values = pressure.option_values(case, lambda name: False)
+    assert values == {"mg_levels_ksp_max_it": 2, "pc_gamg_threshold": 0.1, "ksp_monitor": "true"}
+    values = pressure.option_values(case, lambda name: name == "pc_gamg_threshold")
+    assert "pc_gamg_threshold" not in values and values["mg_levels_ksp_max_it"] == 2
+    # Another preconditioner gets none of GAMG's defaults.
+    assert pressure.option_values({"pc_type": "hypre", "options": {}}, lambda name: False) == {}
 
 
 def test_fixed_dt_beyond_courant_stops_with_message_and_keeps_output(tmp_path):

@@ -67,14 +67,13 @@ def test_dam_break_after_50_steps_matches_one_rank(one_rank_dam_break, tmp_path,
 def test_hydrostatic_pressure_on_two_ranks(tmp_path):
     # The still tank is chaotic: round-off differences between rank counts grow tenfold
     # every ~100 steps and the runs part ways after ~700 steps, so this checks the physics,
-    # not agreement with one rank. At the default rtol 1e-8 the solver's own error feeds
-    # that noise (bottom error -1.4 % on one rank, -2.7 % on two, measured); at 1e-12 both
-    # sit within 0.6 % (+0.1 % and -0.5 %).
-    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "1.0",
+    # not agreement with one rank, over the window of tests/test_fluid.py (2 s, averaged
+    # after 0.5 s).
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "2.0",
                          "-pressure_ksp_rtol", "1e-12"], ranks=2, timeout=300)
     assert result.returncode == 0, result.stderr
     bottom, rms = analysis.hydrostatic_error(tmp_path / "result.h5", depth=0.2, density=1000.0,
-                                             gravity=9.81, settle_time=0.3, spacing=0.01)
+                                             gravity=9.81, settle_time=0.5, spacing=0.01)
     assert abs(bottom) < 0.02, bottom
     assert rms < 0.02, rms
     assert analysis.escaped(tmp_path / "result.h5", [0.0, 0.0], [0.2, 0.36]) == 0
