@@ -62,9 +62,10 @@ def test_output_layout_and_xdmf(hydrostatic_run):
         assert "[[fluid_block]]" in case["toml"] and case["ranks"] == 1
         assert case["parmps_version"]
         frames = sorted(handle["frames"])
-        assert frames[0] == "00000000" and len(frames) == 51
+        # 2 s with a frame every 0.02 s, plus the initial frame.
+        assert frames[0] == "00000000" and len(frames) == 101
         last = handle["frames"][frames[-1]]
-        assert last.attrs["time"] == pytest.approx(1.0)
+        assert last.attrs["time"] == pytest.approx(2.0)
         for name in FRAME_FIELDS:
             assert len(last[name]) == 752
         assert last["id"].dtype == np.int64 and last["kind"].dtype == np.int8
