@@ -72,7 +72,6 @@ class Run:
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
         self.particles = self.decomposition.distribute(global_scene)
         self.fluid = FluidSolver(case, comm, self.decomposition)
-        self.wall_rectangles = guards.wall_rectangles(case)
         self.case_text = case_text
         self.time = 0.0
         self.step_number = 0
@@ -239,7 +238,6 @@ class Run:
                              f"spacing per step; the run is unstable")
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
-        rectangles = self.wall_rectangles if self.moving_walls is None else \
-            guards.wall_rectangles(self.case, self.time)
-        guards.check_wall_penetration(particles, rectangles, self.spacing, comm, step)
+        guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, self.time),
+                                      self.spacing, comm, step)
         return speed
