@@ -33,11 +33,17 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 CASES = os.path.join(ROOT, "cases")
 COLUMN = 0.2            # dam break column width a [m]
-TANK_LENGTH = 1.0       # dam break tank, 5a (cases/dam_break.toml)
 DEPTH = 0.2             # hydrostatic water depth H [m]
 RHO, G = 1000.0, 9.81
 T_DAM = 0.343           # T = 3.4 for a = 0.2 m
 SETTLE = 0.3            # hydrostatic: frames after this time are averaged
+
+
+def dam_break_tank_length():
+    """The dam-break tank's inner length [m], read from cases/dam_break.toml."""
+    import tomllib
+    with open(os.path.join(CASES, "dam_break.toml"), "rb") as handle:
+        return tomllib.load(handle)["tank"][0]["upper"][0]
 
 
 # --------------------------------------------------------------------------
@@ -200,7 +206,8 @@ class Study:
         margin = max(0.05, 5 * spacing)
         sets = [f"particles.spacing={spacing:.10g}", "time.output_interval=0.005",
                 f"domain.lower=[{-margin:.10g}, {-margin:.10g}]",
-                f"domain.upper=[{TANK_LENGTH + margin:.10g}, 1.3]"] + list(scheme_sets)
+                f"domain.upper=[{dam_break_tank_length() + margin:.10g}, 1.3]"]
+        sets += list(scheme_sets)
         record = self.repeat(os.path.join(CASES, "dam_break.toml"), out, sets, T_DAM,
                              ranks=ranks, repeats=repeats, timeout=900)
         record.update(m=m, spacing=spacing, label=label)
@@ -352,7 +359,8 @@ class Study:
         hydro = os.path.join(CASES, "hydrostatic.toml")
         m = 10 if self.quick else 20
         coarse = [f"particles.spacing={COLUMN / m:.10g}", "time.output_interval=0.02",
-                  "domain.lower=[-0.1, -0.1]", f"domain.upper=[{TANK_LENGTH + 0.1:g}, 1.3]"]
+                  "domain.lower=[-0.1, -0.1]",
+                  f"domain.upper=[{dam_break_tank_length() + 0.1:g}, 1.3]"]
         rows = []
         for dt in ((0.004,) if self.quick else (0.0005, 0.002, 0.004, 0.01)):
             rows.append(("dam break a/%d, fixed dt" % m, f"time.fixed_dt = {dt:g} s",

@@ -51,7 +51,8 @@ def main():
 
     case_path = os.path.join(ROOT, "cases", "dam_break.toml")
     with open(case_path, "rb") as handle:
-        spacing = tomllib.load(handle)["particles"]["spacing"]
+        case = tomllib.load(handle)
+    spacing = case["particles"]["spacing"]
     width = args.column_width
     scale = width / COLUMN_WIDTH
     if args.spacing:
@@ -67,7 +68,7 @@ def main():
                    "--set", f"time.output_interval={0.005 * time_scale!r}",
                    "--set", f"particles.spacing={spacing!r}"]
         if scale != 1.0:
-            command += _scaled_geometry(case_path, scale)
+            command += _scaled_geometry(case, scale)
         if args.gate_speed is not None:
             command[3] = _case_with_gate(case_path, directory, width, spacing, args.gate_speed)
         if args.ranks > 1:
@@ -140,15 +141,10 @@ move_end = {height / speed!r}
     return path
 
 
-def _scaled_geometry(case_path, scale):
-    """--set overrides that scale every length of the case by ``scale``."""
-    import tomllib
-    with open(case_path, "rb") as handle:
-        case = tomllib.load(handle)
-    overrides = []
-    for section in ("domain",):
-        for key in ("lower", "upper"):
-            overrides.append(f"{section}.{key}={[v * scale for v in case[section][key]]}")
+def _scaled_geometry(case, scale):
+    """--set overrides that scale every length of ``case`` (the parsed TOML) by ``scale``."""
+    overrides = [f"domain.{key}={[v * scale for v in case['domain'][key]]}"
+                 for key in ("lower", "upper")]
     for section in ("fluid_block", "tank"):
         for index, table in enumerate(case[section]):
             for key in ("lower", "upper"):
