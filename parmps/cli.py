@@ -146,15 +146,15 @@ def main(argv=None):
 
 def _run(args, petsc_options, comm):
     case, case_text = _verdict(comm, lambda: prepare_case(args))
-    from parmps.solid_run import SolidRun, is_solid_only
+    from parmps.run.solid_run import SolidRun, is_solid_only
     if is_solid_only(case):
         Run = SolidRun  # mass-spring bodies alone: no scene, no fluid, no PETSc
     else:
-        from parmps.simulation import Run
+        from parmps.run.simulation import Run
     stem = os.path.splitext(os.path.basename(args.case))[0]
     directory = args.output or os.path.join("out", stem)
     if not args.check and petsc_options:
-        from parmps.pressure import initialise
+        from parmps.fluid.ppe import initialise
         initialise(petsc_options)
     # Geometry is checked while building the scene, on every rank alike.
     run = Run(case, case_text, comm, directory, end_time=None)

@@ -158,7 +158,7 @@ def _validate_table(name, keys, raw):
 
 VEC_ZERO = (0.0, 0.0)
 
-# Prescribed motion of a tank or wall box (parmps.walls): its wall and dummy
+# Prescribed motion of a tank or wall box (parmps.boundaries.walls): its wall and dummy
 # particles translate together at `velocity` while move_start <= t < move_end.
 # "Never stops" is the default move_end, infinity; a case file cannot write
 # it (numbers must be finite), it leaves the key out.
@@ -423,7 +423,7 @@ def _check_consistency(case):
                         f"time.fixed_dt is {time['fixed_dt']:g} s")
     if case["body"]:
         # Bodies are small: building them is the cheapest complete check.
-        from parmps.bodies import build_bodies
+        from parmps.solids.mass_spring.build import build_bodies
         build_bodies(case)
 
 

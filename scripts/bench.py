@@ -23,7 +23,7 @@ CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 
 def spacing_for(target):
     """The l0 = a/m (a = 0.2 m) whose dam-break scene holds closest to ``target`` particles."""
-    from parmps import scene
+    from parmps.core import scene
     best = None
     for m in range(10, 400):
         spacing = 0.2 / m
@@ -59,7 +59,7 @@ def worker(args):
 
     from mpi4py import MPI
 
-    from parmps.simulation import Run
+    from parmps.run.simulation import Run
     comm = MPI.COMM_WORLD
     spacing = args.spacing
     case = _case(spacing, steps=args.warmup + args.steps)
@@ -111,7 +111,7 @@ def main():
     if args.worker:
         worker(args)
         return 0
-    from parmps.tools.parallel import launch_environment, mpirun_command
+    from parmps.parallel.mpi import launch_environment, mpirun_command
     status = 0
     for target in args.particles:
         spacing, _ = spacing_for(target)

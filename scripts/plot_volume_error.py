@@ -39,7 +39,7 @@ def run_case(case, directory, in_process):
         from mpi4py import MPI
 
         from parmps import config
-        from parmps.solid_run import SolidRun
+        from parmps.run.solid_run import SolidRun
         text = case.read_text()
         directory.mkdir(parents=True, exist_ok=True)
         SolidRun(config.validate(config.load_text(text)), text, MPI.COMM_WORLD,

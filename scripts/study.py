@@ -57,7 +57,7 @@ def parmps_command(case, out, sets=(), end_time=None, petsc=(), ranks=1):
         argv += ["--set", item]
     argv += list(petsc)
     if ranks > 1:
-        from parmps.tools.parallel import mpirun_command
+        from parmps.parallel.mpi import mpirun_command
         argv = mpirun_command(ranks, argv)
     return argv
 
@@ -81,7 +81,7 @@ def shown(argv):
 
 def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600):
     """Run one case; returns a record with the outcome, the message and the wall times."""
-    from parmps.tools.parallel import launch_environment
+    from parmps.parallel.mpi import launch_environment
     argv = parmps_command(case, out, sets, end_time, petsc, ranks)
     env = launch_environment()
     env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
@@ -199,7 +199,7 @@ class Study:
 
     # -- dam break -----------------------------------------------------------
     def dam_break_point(self, m, ranks, scheme_sets=(), label="default", repeats=1):
-        from parmps import analysis
+        from parmps.tools import analysis
         spacing = COLUMN / m
         out = self.out("dam_break", f"{label}_m{m}_r{ranks}")
         # Coarse walls (4 layers) reach further out than the case's domain allows.
@@ -507,8 +507,8 @@ def hydrostatic_metrics(path, spacing, settle, depth=DEPTH):
     - ``noise``: RMS over particles and frames of the instantaneous error;
     - ``speed_rms``: RMS fluid speed in the last frame (the surface "boiling").
     """
-    from parmps import analysis
-    from parmps.particles import FLUID
+    from parmps.tools import analysis
+    from parmps.core.particles import FLUID
     frames = analysis.frames(path)
     first = frames[0]
     fluid = first["kind"] == FLUID
@@ -550,7 +550,7 @@ def substeps_per_step(k):
     import tomllib
 
     from parmps import config
-    from parmps.solid import SolidSystem
+    from parmps.solids.mass_spring.body import SolidSystem
     with open(os.path.join(CASES, "mass_spring_7x7.toml"), "rb") as handle:
         raw = tomllib.load(handle)
     raw["body"][0]["stiffness"] = k
@@ -648,7 +648,7 @@ def write_report(study, docs, command):
                 for r in mine:
                     t, z = r["curve"]
                     axes[1].plot(t, z, "-", lw=1, label=f"a/{r['m']}")
-        from parmps import analysis
+        from parmps.tools import analysis
         t_exp, z_exp = analysis.martin_moyce()
         axes[1].plot(t_exp, z_exp, "ko", mfc="none", ms=4, label="Martin & Moyce")
         axes[0].set_xlabel("loop wall time [s]")

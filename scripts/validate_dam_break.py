@@ -47,7 +47,7 @@ def main():
 
     import numpy as np
 
-    from parmps import analysis
+    from parmps.tools import analysis
 
     case_path = os.path.join(ROOT, "cases", "dam_break.toml")
     with open(case_path, "rb") as handle:
@@ -72,7 +72,7 @@ def main():
         if args.gate_speed is not None:
             command[3] = _case_with_gate(case_path, directory, width, spacing, args.gate_speed)
         if args.ranks > 1:
-            from parmps.tools.parallel import launch_environment, mpirun_command
+            from parmps.parallel.mpi import launch_environment, mpirun_command
             command = mpirun_command(args.ranks, command)
             subprocess.run(command, check=True, env=launch_environment())
         else:

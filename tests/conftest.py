@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from parmps.tools.parallel import launch_environment, run_mpirun
+from parmps.parallel.mpi import launch_environment, run_mpirun
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"

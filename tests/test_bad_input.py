@@ -47,7 +47,7 @@ CASES_WITH_ERRORS = {
                                    "[[fluid_block]] particles"),
 }
 
-# Walls with prescribed motion (parmps.walls): the tank of BASE, or a box above its water.
+# Walls with prescribed motion (parmps.boundaries.walls): the tank of BASE, or a box above its water.
 MOVING_TANK = "dummy_layers = 2\n"
 BOX = "\n[[wall_box]]\nlower = [0.05, 0.22]\nupper = [0.15, 0.28]\n"
 

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, ROOT, error_lines, run_parmps
-from parmps.output import read_frame
+from parmps.io.output import read_frame
 
 TESTS = Path(__file__).resolve().parent
 ARCHIMEDES = TESTS / "cases" / "archimedes.toml"
@@ -238,7 +238,7 @@ LEAN = """
 import sys
 from parmps.cli import main
 status = main(sys.argv[1:])
-print(sorted(m for m in ("parmps.coupling", "parmps.inflow") if m in sys.modules))
+print(sorted(m for m in ("parmps.coupling.weak", "parmps.boundaries.open") if m in sys.modules))
 sys.exit(status)
 """
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from parmps.tools.parallel import run_mpirun
+from parmps.parallel.mpi import run_mpirun
 
 WORKER = Path(__file__).parent / "mpi" / "decomposition_worker.py"
 TIMEOUT = 60
@@ -72,7 +72,7 @@ def test_exception_on_one_rank_aborts_the_job(ranks):
 
 
 def test_pack_round_trip():
-    from parmps.decomposition import pack, unpack_new
+    from parmps.parallel.slabs import pack, unpack_new
     rng = np.random.default_rng(0)
     arrays = [rng.normal(size=7), rng.integers(0, 9, size=(7, 3)).astype(np.int64),
               (rng.normal(size=(7, 2)) > 0), np.arange(7, dtype=np.int8),

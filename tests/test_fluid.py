@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import analysis, pressure
-from parmps.output import DIAGNOSTICS, FRAME_FIELDS
+from parmps.fluid import ppe as pressure
+from parmps.tools import analysis
+from parmps.io.output import DIAGNOSTICS, FRAME_FIELDS
 
 # The dam break at a coarse resolution the test budget allows (a = 0.2 m, l0 = a/20).
 COARSE_DAM_BREAK = ["--set", "particles.spacing=0.01"]

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import config, guards
-from parmps.particles import FLUID, WALL, Particles
+from parmps import config
+from parmps.run import guards
+from parmps.core.particles import FLUID, WALL, Particles
 
 BIG_DOMAIN = ["--set", "domain.lower=[-1e3, -1e3]", "--set", "domain.upper=[1e3, 1e3]"]
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from parmps import kernels, operators
-from parmps.neighbours import pair_list, rows_of
+from parmps.core import kernels, operators
+from parmps.core.neighbours import pair_list, rows_of
 
 SPACING = 0.01
 

@@ -1,4 +1,4 @@
-"""Walls with prescribed motion (parmps.walls): exact positions, dummies along, a piston
+"""Walls with prescribed motion (parmps.boundaries.walls): exact positions, dummies along, a piston
 that pushes water without leaking, the same result on 1, 2 and 3 ranks.
 
 Tolerances:
@@ -18,9 +18,12 @@ import numpy as np
 import pytest
 
 from conftest import error_lines, run_parmps
-from parmps import analysis, config, guards, scene
-from parmps.particles import DUMMY, FLUID, WALL
-from parmps.walls import MovingWalls, travel
+from parmps import config
+from parmps.core import scene
+from parmps.run import guards
+from parmps.tools import analysis
+from parmps.core.particles import DUMMY, FLUID, WALL
+from parmps.boundaries.walls import MovingWalls, travel
 
 PISTON = Path(__file__).parent / "cases" / "piston.toml"
 PISTON_SPEED = 0.2

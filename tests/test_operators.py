@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from parmps import operators
-from parmps.neighbours import close_pairs, pair_list, rows_of
+from parmps.core import operators
+from parmps.core.neighbours import close_pairs, pair_list, rows_of
 
 SPACING = 0.01
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps, run_python
-from parmps import analysis
+from parmps.tools import analysis
 
 FAULT = Path(__file__).parent / "mpi" / "raise_on_one_rank.py"
 SOLID_FAULT = Path(__file__).parent / "mpi" / "raise_in_solid_run.py"

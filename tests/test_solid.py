@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from parmps import config
-from parmps.bodies import build_bodies, lattice_geometry
+from parmps.solids.mass_spring.build import build_bodies, lattice_geometry
 from parmps.errors import CaseError
-from parmps.solid import Body, SolidSystem, area_gradient, polygon_area
+from parmps.solids.mass_spring.body import Body, SolidSystem, area_gradient, polygon_area
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"

@@ -1,4 +1,4 @@
-"""Checks of parmps.decomposition, run on every rank of a job.
+"""Checks of parmps.parallel.slabs, run on every rank of a job.
 
 Usage: mpirun -n N python tests/mpi/decomposition_worker.py checks RESULT.json
        mpirun -n N python tests/mpi/decomposition_worker.py abort
@@ -18,10 +18,10 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps import config
-from parmps.decomposition import SlabDecomposition, by_id_blocks
+from parmps.parallel.slabs import SlabDecomposition, by_id_blocks
 from parmps.errors import CaseError
-from parmps.particles import DUMMY, FLUID, WALL, Particles
-from parmps.tools.parallel import abort_on_exception, agree, assert_all
+from parmps.core.particles import DUMMY, FLUID, WALL, Particles
+from parmps.parallel.mpi import abort_on_exception, agree, assert_all
 
 SPACING = 1.0
 HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin

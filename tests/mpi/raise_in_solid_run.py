@@ -10,7 +10,8 @@ import sys
 
 from mpi4py import MPI
 
-from parmps import cli, solid
+from parmps import cli
+from parmps.solids.mass_spring import body as solid
 
 _advance = solid.SolidSystem.advance
 _calls = {"count": 0}

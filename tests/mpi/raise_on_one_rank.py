@@ -10,7 +10,8 @@ import sys
 
 from mpi4py import MPI
 
-from parmps import cli, fluid
+from parmps import cli
+from parmps.fluid import projection as fluid
 
 _step = fluid.FluidSolver.step
 

@@ -36,8 +36,8 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.errors import CaseError
-from parmps.particles import FLUID, INFLOW, Particles
-from parmps.scene import lattice_count
+from parmps.core.particles import FLUID, INFLOW, Particles
+from parmps.core.scene import lattice_count
 
 log = logging.getLogger(__name__)
 

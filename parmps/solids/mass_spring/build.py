@@ -23,7 +23,7 @@ import logging
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.solid import Body, polygon_area
+from parmps.solids.mass_spring.body import Body, polygon_area
 
 log = logging.getLogger(__name__)
 
@@ -306,7 +306,7 @@ def build_body(k, spec, gravity, domain=None):
 
 
 def build_bodies(case):
-    """Every ``[[body]]`` of a validated case, as :class:`~parmps.solid.Body` objects."""
+    """Every ``[[body]]`` of a validated case, as :class:`~parmps.solids.mass_spring.body.Body` objects."""
     gravity = case.get("physics", {}).get("gravity", (0.0, -9.81))
     bodies = [build_body(k, spec, gravity, case.get("domain"))
               for k, spec in enumerate(case.get("body", []))]

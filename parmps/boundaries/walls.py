@@ -7,7 +7,7 @@ otherwise. Its displacement is a function of the time alone,
 does not depend on the step sizes: each step adds ``d(t + dt) - d(t)``, which
 telescopes to ``d(t)`` up to round-off.
 
-Which particles. :func:`parmps.scene.build` numbers particles in the order of
+Which particles. :func:`parmps.core.scene.build` numbers particles in the order of
 the case's geometry entries, so each tank or wall box owns one contiguous block
 of global ids. Ids never change, so the block finds the wall's particles on any
 rank after any migration or rebalance without a per-particle field to carry.
@@ -16,7 +16,7 @@ When. The time loop calls :meth:`MovingWalls.advance` at the start of each
 step, before migration and the halo: the whole fluid step (pair search, number
 density, pressure) then sees the walls where they are at the end of the step,
 as it sees the fluid at its predicted positions (the choice
-:meth:`parmps.coupling.SolidCoupling.predict` makes for solid nodes). Moving
+:meth:`parmps.coupling.weak.SolidCoupling.predict` makes for solid nodes). Moving
 before migration lets the decomposition treat wall particles like any other.
 
 Velocity. A moving wall's particles carry the mean velocity of the step they

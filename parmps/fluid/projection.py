@@ -12,10 +12,10 @@ import time
 
 import numpy as np
 
-from parmps import kernels, operators
+from parmps.core import kernels, operators
 from parmps.errors import RunFailure
-from parmps.neighbours import pair_list
-from parmps.particles import DUMMY, FLUID, INFLOW
+from parmps.core.neighbours import pair_list
+from parmps.core.particles import DUMMY, FLUID, INFLOW
 
 log = logging.getLogger(__name__)
 

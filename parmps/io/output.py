@@ -90,7 +90,7 @@ class Output:
         The particles are first regrouped by blocks of ids, so the frame is one
         array in ascending id whatever the rank count.
         """
-        from parmps.decomposition import by_id_blocks
+        from parmps.parallel.slabs import by_id_blocks
         owned, offset, total = by_id_blocks(particles, self.comm)
         count = len(owned)
         group = self.frames.create_group(f"{step:08d}")

@@ -1,14 +1,14 @@
 """What every time loop shares: when to stop, when a frame and a progress line are due,
 and how a run ends collectively.
 
-The fluid loop (:mod:`parmps.simulation`) and the solid-only loop
-(:mod:`parmps.solid_run`) differ in what a step does, not in these.
+The fluid loop (:mod:`parmps.run.simulation`) and the solid-only loop
+(:mod:`parmps.run.solid_run`) differ in what a step does, not in these.
 """
 
 import time as wallclock
 
 from parmps.errors import CaseError, RunFailure
-from parmps.tools.parallel import abort_on_exception
+from parmps.parallel.mpi import abort_on_exception
 
 PROGRESS_SECONDS = 5.0
 

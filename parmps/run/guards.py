@@ -25,8 +25,8 @@ communicator before anyone raises.
 import numpy as np
 
 from parmps.errors import RunFailure
-from parmps.particles import FLUID
-from parmps.walls import travel
+from parmps.core.particles import FLUID
+from parmps.boundaries.walls import travel
 
 # Depth behind a wall surface, in spacings, past which a fluid particle has
 # leaked: half a spacing puts its centre on the first wall layer's centre line.
@@ -46,7 +46,7 @@ def wall_rectangles(case, time=0.0):
 
     A tank gives its left, right and bottom walls (and top when closed), each
     as thick as its wall and dummy layers; a wall box is its own rectangle.
-    Moving tanks and boxes (parmps.walls) are where their motion has taken them.
+    Moving tanks and boxes (parmps.boundaries.walls) are where their motion has taken them.
     """
     spacing = case["particles"]["spacing"]
     rectangles = []

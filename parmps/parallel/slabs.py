@@ -60,7 +60,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.errors import CaseError
-from parmps.particles import FIELDS, Particles
+from parmps.core.particles import FIELDS, Particles
 
 log = logging.getLogger(__name__)
 

@@ -1,6 +1,6 @@
 """Compiled pair loops for the fluid step.
 
-The same sums as :mod:`parmps.operators`, computed row by row over the CSR
+The same sums as :mod:`parmps.core.operators`, computed row by row over the CSR
 neighbour lists with distances evaluated on the fly. In numpy each operator
 gathers and masks every pair (about 1.7 M at 40k particles) several times; here
 each pair is visited once per operator and nothing is allocated per pair. The

@@ -33,10 +33,10 @@ import logging
 import numpy as np
 from mpi4py import MPI
 
-from parmps import operators
+from parmps.core import operators
 from parmps.errors import CaseError, RunFailure
-from parmps.neighbours import pair_list, rows_of
-from parmps.particles import DUMMY, FLUID, INFLOW, SOLID, Particles
+from parmps.core.neighbours import pair_list, rows_of
+from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID, Particles
 
 log = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ surface it models, as the fluid's first layer lies half a spacing inside.
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.neighbours import close_pairs
-from parmps.particles import DUMMY, FLUID, WALL, Particles
+from parmps.core.neighbours import close_pairs
+from parmps.core.particles import DUMMY, FLUID, WALL, Particles
 
 # Coordinates that should land on the lattice may be off by rounding only.
 _LATTICE_TOLERANCE = 1e-6
@@ -81,7 +81,7 @@ def build(case, bodies=None, open_boundaries=None):
     """All particles of the case, ids 0..N-1 in the order of the case's geometry entries.
 
     Then the material nodes of ``bodies`` (solid nodes, in body order) and last
-    the inflow buffers of ``open_boundaries`` (ids from N, see parmps.inflow).
+    the inflow buffers of ``open_boundaries`` (ids from N, see parmps.boundaries.open).
     Returns the Particles and, for each particle, the index into ``sources`` (the
     names of the geometry entries) that made it.
     """
@@ -104,7 +104,7 @@ def build(case, bodies=None, open_boundaries=None):
             name = f"{section}[{k}]"
             add(name, *builder(spec, spacing, name))
     if bodies:
-        from parmps.coupling import node_particles
+        from parmps.coupling.weak import node_particles
         nodes = node_particles(bodies)
         for k, body in enumerate(bodies):
             mine = nodes.body == k

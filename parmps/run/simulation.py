@@ -5,14 +5,15 @@ import math
 
 import numpy as np
 
-from parmps import guards, scene
-from parmps.decomposition import SlabDecomposition
+from parmps.core import scene
+from parmps.run import guards
+from parmps.parallel.slabs import SlabDecomposition
 from parmps.errors import RunFailure
-from parmps.fluid import FluidSolver, check_finite, max_speed
-from parmps.output import Output
-from parmps.particles import FLUID, KIND_NAMES
-from parmps.tools.timeloop import Schedule, run_collectively
-from parmps.walls import MovingWalls
+from parmps.fluid.projection import FluidSolver, check_finite, max_speed
+from parmps.io.output import Output
+from parmps.core.particles import FLUID, KIND_NAMES
+from parmps.run.schedule import Schedule, run_collectively
+from parmps.boundaries.walls import MovingWalls
 
 log = logging.getLogger(__name__)
 
@@ -51,15 +52,15 @@ class Run:
         self.coupling = None
         bodies = None
         if case["body"]:
-            from parmps.coupling import SolidCoupling, check_body_spacing
-            from parmps.solid import SolidSystem
+            from parmps.coupling.weak import SolidCoupling, check_body_spacing
+            from parmps.solids.mass_spring.body import SolidSystem
             system = SolidSystem.from_case(case)
             check_body_spacing(case, system.bodies)
             self.coupling = SolidCoupling(system, comm)
             bodies = system.bodies
         self.open_boundaries = None
         if case["inlet"] or case["outlet"]:
-            from parmps.inflow import OpenBoundaries
+            from parmps.boundaries.open import OpenBoundaries
             self.open_boundaries = OpenBoundaries(case, comm)
         global_scene, origin, sources = scene.build(case, bodies, self.open_boundaries)
         # Walls with prescribed motion, when the case has any; checked against the
@@ -106,7 +107,7 @@ class Run:
 
     def execute(self, on_step=None):
         """Run to the end time; ``on_step(run)`` is called after every step (benchmarks)."""
-        from parmps.pressure import PressureSolver
+        from parmps.fluid.ppe import PressureSolver
         comm = self.comm
         case = self.case
         self.fluid.pressure_solver = PressureSolver(comm, case["pressure"])
@@ -116,7 +117,7 @@ class Run:
         if self.open_boundaries is not None:
             extra += ("inflow", "outflow")
         if self.coupling is not None:
-            from parmps.solid_run import SolidOutput
+            from parmps.run.solid_run import SolidOutput
             output = SolidOutput(comm, self.directory, self.case_text, self.coupling.system,
                                  extra_diagnostics=extra, extra_series=("fluid_inside",))
             for name, count in self.coupling.system.substep_counts(

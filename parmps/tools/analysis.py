@@ -4,9 +4,9 @@ import os
 
 import numpy as np
 
-from parmps.particles import FLUID
+from parmps.core.particles import FLUID
 
-DATA = os.path.join(os.path.dirname(__file__), "data")
+DATA = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data")
 
 
 def martin_moyce():

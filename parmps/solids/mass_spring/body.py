@@ -183,7 +183,7 @@ class Body:
     """One mass-spring body: arrays, the boundary loop and its windowed loads.
 
     The arrays are owned by the body and updated in place by :meth:`advance`.
-    Build bodies with :func:`parmps.bodies.build_bodies`; this class checks
+    Build bodies with :func:`parmps.solids.mass_spring.build.build_bodies`; this class checks
     nothing about the input.
     """
 
@@ -341,7 +341,7 @@ class SolidSystem:
 
     @classmethod
     def from_case(cls, case):
-        from parmps.bodies import build_bodies
+        from parmps.solids.mass_spring.build import build_bodies
         solid = case.get("solid", {})
         return cls(build_bodies(case), substep=solid.get("substep", 0.0),
                    safety=solid.get("safety", 0.5),

@@ -5,7 +5,7 @@ scene, no decomposition, no fluid solver and no PETSc. Every rank advances the
 (small) bodies alike and takes part in the collective HDF5 calls; rank 0 holds
 the nodes as its particles and writes the data.
 
-:class:`SolidOutput` extends the run's :class:`~parmps.output.Output` with
+:class:`SolidOutput` extends the run's :class:`~parmps.io.output.Output` with
 
 - ``/solids/<body>/time``, ``volume_error``, ``fluid_force`` (T x 2),
   ``centroid`` (T x 2): one row per step; ``/solids/<body>/springs`` (S x 2);
@@ -20,12 +20,12 @@ import os
 
 import numpy as np
 
-from parmps import guards
+from parmps.run import guards
 from parmps.errors import RunFailure
-from parmps.output import Output
-from parmps.particles import SOLID, Particles
-from parmps.solid import SolidSystem
-from parmps.tools.timeloop import Schedule, run_collectively
+from parmps.io.output import Output
+from parmps.core.particles import SOLID, Particles
+from parmps.solids.mass_spring.body import SolidSystem
+from parmps.run.schedule import Schedule, run_collectively
 
 log = logging.getLogger(__name__)
 
