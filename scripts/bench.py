@@ -40,7 +40,7 @@ def spacing_for(target):
 
 
 def _case(spacing, steps=0):
-    from parmps import config
+    from parmps import config, schema
     with open(CASE, "rb") as handle:
         raw = config.load_text(handle.read().decode())
     raw["particles"]["spacing"] = spacing
@@ -50,7 +50,7 @@ def _case(spacing, steps=0):
     raw["domain"]["upper"][1] = 0.9
     raw["time"]["max_steps"] = steps
     raw.setdefault("output", {})["frames"] = False
-    return config.validate(raw)
+    return schema.validate(raw)
 
 
 def worker(args):
@@ -59,32 +59,34 @@ def worker(args):
 
     from mpi4py import MPI
 
-    from parmps.run.simulation import Run
+    from parmps.run.observers import Callback
+    from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
     spacing = args.spacing
     case = _case(spacing, steps=args.warmup + args.steps)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
-    run = Run(case, "", comm, directory)
+    run = Simulation(case, "", comm, directory)
+    timers = run.fluid.timers
+    decomposition = run.decomposition
     marks = {}
 
-    def on_step(current):
-        if current.step_number == args.warmup:
+    def mark_warm(state):
+        if state.step == args.warmup:
             comm.Barrier()
             marks["start"] = time.perf_counter()
-            marks["fluid"] = dict(current.fluid.timers.seconds)
-            marks["halo"] = current.decomposition.halo_seconds
-            marks["migration"] = current.decomposition.migration_seconds
+            marks["fluid"] = dict(timers.seconds)
+            marks["halo"] = decomposition.halo_seconds
+            marks["migration"] = decomposition.migration_seconds
 
-    run.execute(on_step=on_step)
+    run.execute(extra_observers=[Callback(mark_warm)])
     comm.Barrier()
     seconds = time.perf_counter() - marks["start"]
-    timers = run.fluid.timers.seconds
-    breakdown = {part: timers[part] - marks["fluid"][part]
+    breakdown = {part: timers.seconds[part] - marks["fluid"][part]
                  for part in ("neighbours", "operators", "assembly", "solve", "output")}
-    breakdown["halo"] = run.decomposition.halo_seconds - marks["halo"]
-    breakdown["migration"] = run.decomposition.migration_seconds - marks["migration"]
+    breakdown["halo"] = decomposition.halo_seconds - marks["halo"]
+    breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
     breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
-    particles = comm.allreduce(run.particles.n_owned)
+    particles = comm.allreduce(run.state.particles.n_owned)
     if comm.rank == 0:
         line = {
             "particles": particles, "ranks": comm.size, "steps": args.steps,

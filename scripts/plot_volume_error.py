@@ -38,11 +38,11 @@ def run_case(case, directory, in_process):
     if in_process:
         from mpi4py import MPI
 
-        from parmps import config
-        from parmps.run.solid_run import SolidRun
+        from parmps import config, schema
+        from parmps.run.simulation import Simulation
         text = case.read_text()
         directory.mkdir(parents=True, exist_ok=True)
-        SolidRun(config.validate(config.load_text(text)), text, MPI.COMM_WORLD,
+        Simulation(schema.validate(config.load_text(text)), text, MPI.COMM_WORLD,
                  str(directory)).execute()
         return
     subprocess.run([sys.executable, "-m", "parmps", str(case), "-o", str(directory)],

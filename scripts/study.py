@@ -549,13 +549,13 @@ def substeps_per_step(k):
     """Automatic substeps per outer step of the 7x7 body at stiffness k (the solver's own rule)."""
     import tomllib
 
-    from parmps import config
-    from parmps.solids.mass_spring.body import SolidSystem
+    from parmps import config, schema
+    from parmps.solids.mass_spring.model import MassSpringModel
     with open(os.path.join(CASES, "mass_spring_7x7.toml"), "rb") as handle:
         raw = tomllib.load(handle)
     raw["body"][0]["stiffness"] = k
     raw["body"][0]["shear_stiffness"] = k
-    system = SolidSystem.from_case(config.validate(raw))
+    system = MassSpringModel.from_case(schema.validate(raw))
     return system.substep_counts(raw["time"]["fixed_dt"])["block"]
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from conftest import error_lines, run_parmps
-from parmps import config
+from parmps import config, schema
 from parmps.core import scene
 from parmps.run import guards
 from parmps.tools import analysis
@@ -61,7 +61,7 @@ def _case(**sections):
            "particles": {"spacing": 0.1}, "time": {"end": 1.0},
            "fluid_block": [{"lower": [0.0, 0.0], "upper": [0.5, 0.5]}]}
     raw.update(sections)
-    return config.validate(raw)
+    return schema.validate(raw)
 
 
 def test_travel_is_piecewise_linear():

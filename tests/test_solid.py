@@ -7,17 +7,18 @@ import pathlib
 import numpy as np
 import pytest
 
-from parmps import config
+from parmps import config, schema
 from parmps.solids.mass_spring.build import build_bodies, lattice_geometry
 from parmps.errors import CaseError
-from parmps.solids.mass_spring.body import Body, SolidSystem, area_gradient, polygon_area
+from parmps.solids.mass_spring.body import Body, area_gradient, polygon_area
+from parmps.solids.mass_spring.model import MassSpringModel
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
 
 
 def load_case(path):
-    return config.validate(config.load_text(pathlib.Path(path).read_text()))
+    return schema.validate(config.load_text(pathlib.Path(path).read_text()))
 
 
 def lattice_body(stiffness=1.0e3, mass=0.01, damping=0.0, constraint=True, n=7, seed=None,
@@ -84,7 +85,7 @@ def two_node_system(substep):
     body.position[1, 0] += stretch
     reduced = m1 * m2 / (m1 + m2)
     period = 2 * math.pi * math.sqrt(reduced / stiffness)
-    return SolidSystem([body], substep=substep), body, period
+    return MassSpringModel([body], substep=substep), body, period
 
 
 def test_two_node_spring_period_and_energy():
@@ -139,7 +140,7 @@ def test_two_node_spring_at_the_automatic_substep():
 def test_momentum_conserved_without_external_force(constraint):
     body = lattice_body(damping=0.05, constraint=constraint, seed=1, speed=0.2)
     body.gravity = np.zeros(2)
-    system = SolidSystem([body])
+    system = MassSpringModel([body])
     p0 = body.momentum()
     scale = float(np.sum(body.mass * np.linalg.norm(body.velocity, axis=1)))
     momentum = run(system, 1e-3, 200, body.momentum)
@@ -152,7 +153,7 @@ def test_momentum_conserved_without_external_force(constraint):
 
 def run_case(path, dt_outer=None):
     case = load_case(path)
-    system = SolidSystem.from_case(case)
+    system = MassSpringModel.from_case(case)
     body = system.bodies[0]
     dt = dt_outer or case["time"]["fixed_dt"]
     steps = int(round(case["time"]["end"] / dt))
@@ -185,7 +186,7 @@ def test_stiffness_sweep_stable_and_substeps_grow_like_sqrt_k():
     for stiffness in stiffnesses:
         # Random node velocities put energy into every mode, the stiffest included.
         body = lattice_body(stiffness=stiffness, seed=2, speed=0.05)
-        system = SolidSystem([body])
+        system = MassSpringModel([body])
         energy0 = sum(body.energy())
         energy = run(system, dt_outer, 4, lambda: sum(body.energy()))
         assert np.all(np.isfinite(energy))
@@ -198,9 +199,9 @@ def test_stiffness_sweep_stable_and_substeps_grow_like_sqrt_k():
 def test_fixed_substep_above_the_limit_is_refused_with_the_limit():
     body = lattice_body(stiffness=1e5)
     limit = body.stability_limit()
-    SolidSystem([body], substep=0.9 * limit)
+    MassSpringModel([body], substep=0.9 * limit)
     with pytest.raises(CaseError, match=f"stability limit.*{limit:.6g}"):
-        SolidSystem([lattice_body(stiffness=1e5)], substep=1.1 * limit)
+        MassSpringModel([lattice_body(stiffness=1e5)], substep=1.1 * limit)
 
 
 def test_limit_bounds_the_true_highest_frequency():
@@ -224,7 +225,7 @@ def test_limit_bounds_the_true_highest_frequency():
 
 def test_load_window_and_pinned_side():
     case = load_case(CASES / "mass_spring_7x7.toml")
-    system = SolidSystem.from_case(case)
+    system = MassSpringModel.from_case(case)
     body = system.bodies[0]
     bottom = body.position[:, 1] == body.position[:, 1].min()
     top = body.position[:, 1] == body.position[:, 1].max()
@@ -255,18 +256,18 @@ ids = [2]
 force = [0.1, 0.0]
 end = 0.1
 """
-    case = config.validate(config.load_text(text))
+    case = schema.validate(config.load_text(text))
     (body,) = build_bodies(case)
     assert body.name == "triangle" and body.n_nodes == 4 and len(body.springs) == 6
     assert body.rest_volume == pytest.approx(0.5 * 0.02 * 0.02)
-    system = SolidSystem([body])
+    system = MassSpringModel([body])
     errors = run(system, 1e-3, 100, body.volume_error)
     assert np.array_equal(body.position[0], [0.0, 0.0])
     # The body swings about its pinned node: the linear prediction of §1.5
     # leaves the area swept per substep (dt Omega)^2, the quadratic one does not.
     assert 1e-6 < np.max(np.abs(errors)) < 1e-3
     case["solid"]["constraint_prediction"] = "quadratic"
-    system = SolidSystem.from_case(case)
+    system = MassSpringModel.from_case(case)
     body = system.bodies[0]
     errors = run(system, 1e-3, 100, body.volume_error)
     assert np.max(np.abs(errors)) < 1e-6
@@ -380,8 +381,8 @@ forse = [0.0, -1.0]
 
 
 def check_bad(text):
-    case = config.validate(config.load_text(text))
-    SolidSystem.from_case(case)
+    case = schema.validate(config.load_text(text))
+    MassSpringModel.from_case(case)
 
 
 @pytest.mark.parametrize("name", sorted(BAD_BODIES))

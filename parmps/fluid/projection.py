@@ -1,4 +1,4 @@
-"""One MPS fluid step: prediction, pressure, correction (DESIGN.md §1.2).
+"""One MPS fluid step: prediction, pressure, correction (docs/design.md §1.3).
 
 The step works on one rank's particles (owned, then ghosts) and a communicator;
 the decomposition keeps the ghosts current after every change of positions.
@@ -9,13 +9,16 @@ than a fraction of the skin in one step (the Courant limit).
 
 import logging
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
-from parmps.core import kernels, operators
-from parmps.errors import RunFailure
+from parmps.core import kernels
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW
+from parmps.errors import RunFailure
+from parmps.fluid.constants import MPSConstants
+from parmps.fluid.schemes import GRADIENTS, SOURCES, scheme_class
 
 log = logging.getLogger(__name__)
 
@@ -40,37 +43,50 @@ class Timers:
         self.start(None)
 
 
+@dataclass
+class PressureStep:
+    """What a source scheme may read to make the PPE's right-hand side.
+
+    ``position`` is the start of the step (owned, then ghosts), ``position_star``
+    and ``velocity_star`` the prediction; ``number_density`` is n* of the owned
+    particles and ``unknown_index`` the owned particles whose rows are unknowns.
+    """
+
+    dt: float
+    n_owned: int
+    indptr: np.ndarray
+    cols: np.ndarray
+    position: np.ndarray
+    position_star: np.ndarray
+    velocity_star: np.ndarray
+    number_density: np.ndarray
+    unknown_index: np.ndarray
+
+
 class FluidSolver:
-    """The constants of the MPS scheme for a case, and the step that uses them."""
+    """The MPS projection step for a case: its constants, its schemes, its pressure solver.
+
+    ``source`` and ``gradient`` are the registered schemes the case chose
+    (:mod:`parmps.fluid.schemes`); the coupling takes its pressure gradient from
+    ``gradient`` too, so the fluid and the bodies feel the same one.
+    """
 
     def __init__(self, case, comm, decomposition, pressure_solver=None):
         self.comm = comm
         self.decomposition = decomposition
-        spacing = case["particles"]["spacing"]
+        constants = MPSConstants.from_case(case)
+        self.constants = constants
         mps = case["mps"]
-        self.spacing = spacing
-        self.re_number_density = mps["re_number_density"] * spacing
-        self.re_laplacian = mps["re_laplacian"] * spacing
-        self.search_radius = self.re_laplacian + case["parallel"]["halo_skin"] * spacing
-        self.n0, _ = operators.reference_values(spacing, self.re_number_density)
-        self.n0_laplacian, self.lambda0 = operators.reference_values(spacing, self.re_laplacian)
-        self.laplacian_coefficient = 2.0 * operators.DIMENSION / (self.lambda0 * self.n0_laplacian)
-        self.neighbour_count0 = operators.neighbour_count_reference(spacing,
-                                                                    self.re_number_density)
-        self.density = case["fluid"]["density"]
-        self.viscosity = case["fluid"]["viscosity"]
+        self.source = scheme_class(SOURCES, mps["source"])(mps[mps["source"]], constants)
+        self.gradient = scheme_class(GRADIENTS, mps["gradient"])(mps[mps["gradient"]],
+                                                                 constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
-        self.relaxation = mps["relaxation"]
-        self.gradient_correction = mps["gradient_correction"]
-        self.gradient_correction_limit = mps["gradient_correction_limit"]
-        self.source_term = mps["source_term"]
-        self.mixed_relaxation = mps["mixed_relaxation"]
         self.compressibility = mps["compressibility"]
         self.clamp = mps["clamp_negative_pressure"]
         self.collision = mps["collision"]
-        self.collision_distance = mps["collision_distance"] * spacing
+        self.collision_distance = mps["collision_distance"] * constants.spacing
         self.restitution = mps["restitution"]
         self.pressure_solver = pressure_solver
         self.timers = Timers()
@@ -90,6 +106,7 @@ class FluidSolver:
         """
         timers = self.timers
         decomposition = self.decomposition
+        c = self.constants
         n = particles.n_owned
         kind = particles.kind
         position = particles.position
@@ -97,16 +114,16 @@ class FluidSolver:
         moving = self.moving(kind[:n])
 
         timers.start("neighbours")
-        indptr, cols = pair_list(position, self.search_radius, n_rows=n)
+        indptr, cols = pair_list(position, c.search_radius, n_rows=n)
 
         timers.start("operators")
         velocity_star = velocity.copy()
         position_star = position.copy()
         acceleration = np.broadcast_to(self.gravity, (n, 2)).copy()
-        if self.viscosity > 0.0:
-            acceleration += (self.viscosity * self.laplacian_coefficient) * \
+        if c.viscosity > 0.0:
+            acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(indptr, cols, position, velocity,
-                                             self.re_laplacian, n)
+                                             c.re_laplacian, n)
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
@@ -124,10 +141,10 @@ class FluidSolver:
 
         timers.start("operators")
         number_density, neighbour_count = kernels.number_density(
-            indptr, cols, position_star, self.re_number_density, n)
-        surface = number_density < self.surface_threshold * self.n0
+            indptr, cols, position_star, c.re_number_density, n)
+        surface = number_density < self.surface_threshold * c.n0
         if self.neighbour_threshold > 0.0:
-            surface |= neighbour_count < self.neighbour_threshold * self.neighbour_count0
+            surface |= neighbour_count < self.neighbour_threshold * c.neighbour_count0
         has_pressure = kind != DUMMY
         unknown = has_pressure[:n] & ~surface
         if dirichlet is not None:
@@ -144,25 +161,15 @@ class FluidSolver:
 
         timers.start("assembly")
         csr_indptr, columns, values = kernels.poisson_rows(
-            indptr, cols, position_star, self.re_laplacian, row_number, is_unknown,
-            self.laplacian_coefficient, self.density * self.compressibility / dt ** 2,
-            self.laplacian_coefficient * self.n0_laplacian)
+            indptr, cols, position_star, c.re_laplacian, row_number, is_unknown,
+            c.laplacian_coefficient, c.density * self.compressibility / dt ** 2,
+            c.laplacian_coefficient * c.n0_laplacian)
         rhs = np.zeros(len(pressure_index))
         in_rows = unknown[pressure_index]
-        unknown_index = pressure_index[in_rows]
-        if self.source_term == "mixed":
-            # Tanaka & Masunaga: rho/dt div u* plus a weak density term at the
-            # start-of-step positions; far less pressure noise than n* alone.
-            current_density, _ = kernels.number_density(indptr, cols, position,
-                                                        self.re_number_density, n)
-            divergence = (operators.DIMENSION / self.n0) * kernels.divergence_sum(
-                indptr, cols, position_star, velocity_star, self.re_number_density, n)
-            rhs[in_rows] = (-(self.density / dt) * divergence[unknown_index]
-                            + self.mixed_relaxation * (self.density / dt ** 2)
-                            * (current_density[unknown_index] - self.n0) / self.n0)
-        else:
-            rhs[in_rows] = (self.density / dt ** 2) * self.relaxation * \
-                (number_density[unknown_index] - self.n0) / self.n0
+        rhs[in_rows] = self.source.rhs(PressureStep(
+            dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
+            position_star=position_star, velocity_star=velocity_star,
+            number_density=number_density, unknown_index=pressure_index[in_rows]))
 
         timers.start("solve")
         guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)
@@ -179,13 +186,9 @@ class FluidSolver:
         decomposition.refresh([pressure])
 
         timers.start("operators")
-        pressure_gradient = (operators.DIMENSION / self.n0) * kernels.pressure_gradient_sum(
-            indptr, cols, position_star, pressure, has_pressure, self.re_number_density, n)
-        if self.gradient_correction:
-            kernels.correct_gradient(indptr, cols, position_star, has_pressure,
-                                     self.re_number_density, operators.DIMENSION / self.n0,
-                                     pressure_gradient, self.gradient_correction_limit)
-        correction = pressure_gradient[moving] / self.density
+        pressure_gradient = self.gradient.gradient(indptr, cols, position_star, pressure,
+                                                   has_pressure, n)
+        correction = pressure_gradient[moving] / c.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction
 

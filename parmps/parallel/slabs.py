@@ -3,6 +3,8 @@
 The interface the solver uses (all methods are collective over ``comm``):
 
 - ``SlabDecomposition(comm, case)``: the slab layout for a case.
+- ``update(particles, step)``: what a step needs after positions changed:
+  ``migrate``, ``rebalance`` and ``build_halo`` in that order.
 - ``distribute(particles)``: from the global scene (the same on every rank) keep
   the particles this rank owns.
 - ``migrate(particles)``: drop ghosts, send owned particles that left the slab to
@@ -60,6 +62,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.errors import CaseError
+from parmps.core.settings import search_radius
 from parmps.core.particles import FIELDS, Particles
 
 log = logging.getLogger(__name__)
@@ -129,8 +132,7 @@ class SlabDecomposition:
         self.left, self.right = self.cart.Shift(0, 1)
         spacing = case["particles"]["spacing"]
         self.spacing = float(spacing)
-        # reach: the neighbour-search radius (re_laplacian plus the skin).
-        self.reach = (case["mps"]["re_laplacian"] + case["parallel"]["halo_skin"]) * spacing
+        self.reach = search_radius(case)
         self.margin = float(case["parallel"].get("migration_margin", 0.0)) * spacing
         self.halo_width = self.reach + self.margin
         self.min_slab_width = self.reach + 2.0 * self.margin
@@ -249,6 +251,15 @@ class SlabDecomposition:
             k = min(candidates, key=lambda g: (abs(g - target), g))
             edges[i] = 0.5 * (xs[k - 1] + xs[k])
         return edges
+
+    # -- the per-step update ------------------------------------------------------------------
+
+    def update(self, particles, step):
+        """Everything positions changed since the last step: migrate, rebalance when due,
+        then rebuild the halo. Returns owned particles followed by current ghosts."""
+        particles = self.migrate(particles)
+        particles = self.rebalance(particles, step)
+        return self.build_halo(particles)
 
     # -- migration ------------------------------------------------------------------------------
 

@@ -14,12 +14,8 @@ communicator before anyone raises.
   wall's own particles: the wall has leaked. A particle cannot cross a whole
   wall (at least two wall layers plus dummies) between two checks without a
   Courant number above 1, which the time loop stops first.
-- :func:`check_bodies`: a mass-spring body whose state is non-finite, whose
-  area constraint has lost control (``VOLUME_ERROR_LIMIT``) or whose springs
-  are stretched far beyond anything linear springs model (``STRETCH_LIMIT``).
-  Those are the signatures of a blown-up solid (forces too large for the
-  substep, an inverted polygon); without this guard such a run goes on to
-  its end time with meaningless numbers.
+- a blown-up body is the solid model's own check (``SolidModel.check``; for
+  mass-spring bodies :mod:`parmps.solids.mass_spring.model`).
 """
 
 import numpy as np
@@ -31,15 +27,6 @@ from parmps.boundaries.walls import travel
 # Depth behind a wall surface, in spacings, past which a fluid particle has
 # leaked: half a spacing puts its centre on the first wall layer's centre line.
 WALL_MARGIN = 0.5
-
-# The area constraint holds |V - V0|/V0 near 1e-6; ten percent means the
-# Lagrange step no longer controls the polygon.
-VOLUME_ERROR_LIMIT = 0.1
-
-# Linear springs stretched twenty times their rest length model nothing real;
-# in practice only an unstable integration or a runaway load gets there.
-STRETCH_LIMIT = 20.0
-
 
 def wall_rectangles(case, time=0.0):
     """The wall material at ``time`` as rectangles ``(lower, upper, name)``, in metres.
@@ -103,40 +90,6 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step):
         raise RunFailure(
             f"step {step}: fluid particle {pid} went through a wall: it is inside "
             f"{rectangles[k][2]} at ({x:.4g}, {y:.4g}) ({count} fluid particles inside walls); "
-            f"the wall's pressure did not hold it back (weak PPE source: mps.relaxation, "
+            f"the wall's pressure did not hold it back (weak PPE source: mps.density.relaxation, "
             f"mps.compressibility) or the step is too long for the flow (lower time.dt_max "
             f"or time.cfl)")
-
-
-def body_state(body):
-    """(finite, |volume error|, largest spring stretch over rest length) of one body."""
-    finite = bool(np.all(np.isfinite(body.position)) and np.all(np.isfinite(body.velocity)))
-    if not finite:
-        return False, np.inf, np.inf
-    error = abs(body.volume_error()) if body.volume_constraint else 0.0
-    springs = body.springs
-    separation = body.position[springs[:, 0]] - body.position[springs[:, 1]]
-    length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
-    stretch = float((length / body.rest_length).max()) if len(springs) else 1.0
-    return True, float(error), stretch
-
-
-def check_bodies(bodies, step, time):
-    """Stop if a body blew up. Bodies are replicated (or broadcast) on every rank,
-    so every rank reaches the same verdict without communication."""
-    for body in bodies:
-        finite, error, stretch = body_state(body)
-        speed = float(np.sqrt((body.velocity ** 2).sum(axis=1)).max()) if finite else np.inf
-        if not finite:
-            cause = "its node positions or velocities became non-finite"
-        elif error > VOLUME_ERROR_LIMIT:
-            cause = (f"its area constraint lost control (volume error {error:.3g} > "
-                     f"{VOLUME_ERROR_LIMIT:g}; fastest node {speed:.4g} m/s)")
-        elif stretch > STRETCH_LIMIT:
-            cause = (f"a spring is stretched to {stretch:.3g} times its rest length "
-                     f"(> {STRETCH_LIMIT:g}; fastest node {speed:.4g} m/s)")
-        else:
-            continue
-        raise RunFailure(f"step {step}: body '{body.name}' blew up at t = {time:.6g} s: {cause}; "
-                         f"the loads or fluid forces are too large for the body, or its "
-                         f"substep too long (solid.substep, solid.safety)")

@@ -17,7 +17,7 @@ import sys
 import numpy as np
 from mpi4py import MPI
 
-from parmps import config
+from parmps import config, schema
 from parmps.parallel.slabs import SlabDecomposition, by_id_blocks
 from parmps.errors import CaseError
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
@@ -30,7 +30,7 @@ HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
 def make_case(lower_x, upper_x, **parallel):
     """A case with the default halo; strict migration (no margin) unless asked."""
     parallel.setdefault("migration_margin", 0.0)
-    return config.validate({
+    return schema.validate({
         "domain": {"lower": [lower_x, 0.0], "upper": [upper_x, 10.0]},
         "particles": {"spacing": SPACING},
         "time": {"end": 1.0},

@@ -1,0 +1,81 @@
+"""Case sections of the boundaries: tanks and wall boxes (fixed or moving), inlets, outlets."""
+
+import math
+
+from parmps.config import Key, Section, check_ordered_box
+from parmps.errors import CaseError
+
+# Prescribed motion of a tank or wall box (parmps.boundaries.walls): its wall and dummy
+# particles translate together at `velocity` while move_start <= t < move_end.
+# "Never stops" is the default move_end, infinity; a case file cannot write
+# it (numbers must be finite), it leaves the key out.
+MOTION_KEYS = {
+    "velocity": Key("vec2", [0.0, 0.0],
+                    doc="constant velocity of the whole geometry, walls and dummies [m/s]; "
+                        "[0, 0]: fixed"),
+    "move_start": Key("float", 0.0, ge=0.0, doc="time the motion starts [s]"),
+    "move_end": Key("float", math.inf, gt=0.0,
+                    doc="time the motion stops [s], > move_start; default: never stops"),
+}
+
+WALL_SECTIONS = ("tank", "wall_box")
+
+SECTIONS = {
+    "tank": Section({
+        "lower": Key("vec2", doc="inner lower-left corner (the wall surface)"),
+        "upper": Key("vec2", doc="inner upper-right corner; the side walls end at its y"),
+        "wall_layers": Key("int", 2, ge=1, le=10),
+        "dummy_layers": Key("int", 2, ge=0, le=10),
+        "open_top": Key("bool", True),
+        **MOTION_KEYS,
+    }, many=True, doc="walls around a rectangle, with dummy layers behind them; they may "
+                      "translate at a constant velocity (see MOTION_KEYS)"),
+    "wall_box": Section({
+        "lower": Key("vec2"),
+        "upper": Key("vec2"),
+        "wall_layers": Key("int", 2, ge=1, le=10),
+        **MOTION_KEYS,
+    }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside; "
+                      "it may translate at a constant velocity (see MOTION_KEYS)"),
+    "inlet": Section({
+        "lower": Key("vec2", doc="lower-left corner of the buffer zone"),
+        "upper": Key("vec2", doc="upper-right corner of the buffer zone"),
+        "velocity": Key("vec2", doc="uniform inflow velocity U0, along x or y [m/s]"),
+    }, many=True, doc="an inflow buffer zone: lattice columns of inflow particles moving at "
+                      "U0; new columns enter at its upstream face, particles leaving its "
+                      "downstream face become fluid"),
+    "outlet": Section({
+        "side": Key("str", choices=("left", "right", "bottom", "top"),
+                    doc="the domain side through which fluid leaves and is removed"),
+        "velocity": Key("vec2", [0.0, 0.0],
+                        doc="[0, 0]: plain removal; else fluid within `buffer` layers of "
+                            "the side becomes an outflow buffer moving at this velocity"),
+        "buffer": Key("int", 4, ge=1, le=20, doc="outflow buffer depth, in particles"),
+        "pressure": Key("str", "dirichlet", choices=("dirichlet", "fluid"),
+                        doc="outflow buffer particles: P = 0 (the channel's pressure "
+                            "reference) or pressure unknowns like fluid"),
+    }, many=True, doc="an open side of the domain: fluid crossing it is removed"),
+}
+
+
+def check(case):
+    for kind in (*WALL_SECTIONS, "inlet"):
+        for k, item in enumerate(case[kind]):
+            check_ordered_box(f"{kind}[{k}]", item)
+    for kind in WALL_SECTIONS:
+        for k, item in enumerate(case[kind]):
+            if not item["move_end"] > item["move_start"]:
+                raise CaseError(f"{kind}[{k}].move_end ({item['move_end']}) must exceed "
+                                f"{kind}[{k}].move_start ({item['move_start']})")
+    time = case["time"]
+    if time["fixed_dt"] > 0:
+        # A wall's speed is known now: a fixed step too long for it is a case error.
+        for kind in WALL_SECTIONS:
+            for k, item in enumerate(case[kind]):
+                speed = math.hypot(*item["velocity"])
+                if speed * time["fixed_dt"] > time["cfl"] * case["particles"]["spacing"]:
+                    raise CaseError(
+                        f"{kind}[{k}].velocity: a wall moving at {speed:g} m/s needs "
+                        f"dt <= time.cfl x spacing / speed = "
+                        f"{time['cfl'] * case['particles']['spacing'] / speed:.4g} s, but "
+                        f"time.fixed_dt is {time['fixed_dt']:g} s")

@@ -1,0 +1,31 @@
+"""Case section of the fluid-solid coupling."""
+
+from parmps.config import Key, Section
+from parmps.core.settings import has_fluid
+from parmps.errors import CaseError
+
+# A lattice body's node spacing must match the particle spacing within this.
+_SPACING_TOLERANCE = 1e-6
+
+SECTIONS = {
+    "coupling": Section({
+        "scheme": Key("str", "weak", choices=("weak",),
+                      doc="how fluid and bodies exchange forces each step (parmps.coupling."
+                          "SCHEMES): weak = one fluid step, then the bodies' substeps with "
+                          "the fluid force held"),
+    }),
+}
+
+
+def check(case):
+    """In a fluid, a lattice body's nodes must sit l0 apart: they are particles of it."""
+    if not has_fluid(case):
+        return
+    spacing = case["particles"]["spacing"]
+    for k, spec in enumerate(case["body"]):
+        if spec["type"] == "lattice" and \
+                abs(spec["spacing"] - spacing) > _SPACING_TOLERANCE * spacing:
+            name = spec["name"] or f"body{k}"
+            raise CaseError(f"body[{k}] '{name}': spacing {spec['spacing']:g} must "
+                            f"equal particles.spacing {spacing:g} in a case with fluid (its "
+                            f"nodes are particles of the fluid)")

@@ -1,0 +1,64 @@
+"""Case sections of the fluid: its material, the MPS scheme and the pressure solver."""
+
+from parmps.config import Key, Section
+from parmps.errors import CaseError
+from parmps.fluid.schemes import GRADIENTS, SOURCES, registered
+
+
+def _mps_section():
+    keys = {
+        "re_number_density": Key("float", 2.3, gt=1.0, le=5.0,
+                                 doc="radius for number density and gradient, in l0"),
+        "re_laplacian": Key("float", 3.1, gt=1.0, le=5.0, doc="radius for the Laplacian, in l0"),
+        "surface_threshold": Key("float", 0.97, gt=0.0, lt=1.0,
+                                 doc="beta: n* < beta n0 marks a free-surface particle"),
+        "neighbour_threshold": Key("float", 0.0, ge=0.0, lt=1.0,
+                                   doc="also surface if neighbour count < this times the "
+                                       "full-lattice count (0 disables)"),
+        "source": Key("str", "density", choices=tuple(SOURCES),
+                      doc="the PPE source scheme (settings in [mps.<name>])"),
+        "gradient": Key("str", "minimum", choices=tuple(GRADIENTS),
+                        doc="the pressure-gradient scheme (settings in [mps.<name>])"),
+        "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
+        "clamp_negative_pressure": Key("bool", True),
+        "collision": Key("bool", True),
+        "collision_distance": Key("float", 0.5, gt=0.0, lt=1.0, doc="in l0"),
+        "restitution": Key("float", 0.2, ge=0.0, le=1.0),
+    }
+    for name, scheme in registered():
+        keys[name] = Key("table", keys=scheme.KEYS, doc=scheme.__doc__ or "")
+    replaced = {
+        "relaxation": "the density source's gamma is [mps.density] relaxation",
+        "source_term": "choose the source with mps.source (\"density\", \"mixed\", ...)",
+        "mixed_relaxation": "the mixed source's gamma is [mps.mixed] relaxation",
+        "gradient_correction": "choose the gradient with mps.gradient = \"corrected\"",
+        "gradient_correction_limit": "the corrected gradient's limit is "
+                                     "[mps.corrected] eigenvalue_limit",
+    }
+    return Section(keys, replaced=replaced)
+
+
+SECTIONS = {
+    "fluid": Section({
+        "density": Key("float", 1000.0, gt=0.0, doc="rho [kg/m^3]"),
+        "viscosity": Key("float", 1.0e-6, ge=0.0, doc="kinematic viscosity nu [m^2/s]"),
+    }),
+    "mps": _mps_section(),
+    "pressure": Section({
+        "rtol": Key("float", 1.0e-8, gt=0.0, lt=1.0),
+        "max_iterations": Key("int", 1000, gt=0),
+        "reuse_preconditioner": Key("int", 4, ge=0,
+                                    doc="steps a preconditioner set-up is reused for "
+                                        "(0: set up every step)"),
+        "ksp_type": Key("str", "cg"),
+        "pc_type": Key("str", "gamg"),
+        "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),
+    }),
+}
+
+
+def check(case):
+    mps = case["mps"]
+    if mps["re_laplacian"] < mps["re_number_density"]:
+        raise CaseError(f"mps.re_laplacian ({mps['re_laplacian']}) must be >= "
+                        f"mps.re_number_density ({mps['re_number_density']})")

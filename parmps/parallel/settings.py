@@ -1,0 +1,20 @@
+"""Case section of the decomposition: halo, load balance, migration."""
+
+from parmps.config import Key, Section
+
+SECTIONS = {
+    "parallel": Section({
+        "halo_skin": Key("float", 0.6, ge=0.0, le=5.0,
+                         doc="extra halo width and neighbour-list skin, in l0"),
+        "rebalance_interval": Key("int", 20, gt=0, doc="steps between load-balance checks"),
+        "imbalance_tolerance": Key("float", 1.10, gt=1.0,
+                                   doc="rebalance when max/mean particles exceeds this"),
+        "migration_margin": Key("float", 0.5, ge=0.0, le=5.0,
+                                doc="particles migrate once one is this far (in l0) outside "
+                                    "its slab; halo and slabs widen by it (0: every step)"),
+    }),
+}
+
+
+def check(case):
+    pass

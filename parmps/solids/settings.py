@@ -1,0 +1,71 @@
+"""Case sections of the solids: the shared solver settings and the bodies."""
+
+import math
+
+from parmps.config import Key, Section
+
+SECTIONS = {
+    "solid": Section({
+        "model": Key("str", "mass_spring", choices=("mass_spring",),
+                     doc="the solid model every body uses (parmps.solids.MODELS)"),
+        "substep": Key("float", 0.0, ge=0.0,
+                       doc="fixed solid substep [s]; 0 chooses it from the stiffest node"),
+        "safety": Key("float", 0.5, gt=0.0, le=1.0,
+                      doc="automatic substep = safety x the Verlet stability limit"),
+        "constraint_prediction": Key("str", "linear", choices=("linear", "quadratic"),
+                                     doc="linear: the area multiplier of docs/design.md §1.5; "
+                                         "quadratic: also predicts the area swept in a "
+                                         "substep (rotating bodies)"),
+    }, doc="mass-spring solver settings shared by every body"),
+    "body": Section({
+        "name": Key("str", "", doc="used in the output; default body<k>"),
+        "type": Key("str", "lattice", choices=("lattice", "general")),
+        "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
+        "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
+        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
+        "lower": Key("vec2", [0.0, 0.0], doc="lattice: position of the lower-left node"),
+        "nodes": Key("points", [], doc="general: node positions [[x, y], ...]"),
+        "springs": Key("pairs", [], doc="general: springs as node index pairs [[i, j], ...]"),
+        "boundary": Key("ints", [], doc="general: the boundary loop, counter-clockwise"),
+        "masses": Key("floats", [], gt=0.0, doc="general: one mass per node [kg]"),
+        "spring_stiffness": Key("floats", [], gt=0.0,
+                                doc="general: one stiffness per spring [N/m]"),
+        "node_mass": Key("float", 0.0, ge=0.0, doc="mass of every node [kg]"),
+        "density": Key("float", 0.0, ge=0.0,
+                       doc="lattice: node mass = density x spacing^2 (per unit depth)"),
+        "stiffness": Key("float", gt=0.0, doc="structural (or every) spring [N/m]"),
+        "shear_stiffness": Key("float", 0.0, ge=0.0,
+                               doc="lattice diagonal springs [N/m]; 0 means = stiffness"),
+        "damping": Key("float", 0.0, ge=0.0, doc="b in -b (v_i - v_j) [N s/m]"),
+        "volume_constraint": Key("bool", True, doc="keep the boundary polygon's area"),
+        "gravity": Key("bool", True, doc="feel physics.gravity"),
+        "velocity": Key("vec2", [0.0, 0.0], doc="initial velocity of every node [m/s]"),
+        "pinned": Key("str", "none", choices=("none", "top", "bottom", "left", "right", "all"),
+                      doc="a side whose nodes never move"),
+        "pinned_ids": Key("ints", [], ge=0, doc="more nodes that never move"),
+        "anchors": Key("points", [], doc="fixed points (e.g. on a rigid wall) that close the "
+                                         "boundary polygon: the area kept is the one between "
+                                         "the body and them; they are not particles"),
+        "anchor_row": Key("str", "bottom", choices=("bottom", "top"),
+                          doc="lattice with anchors: the loop runs through the anchors (in "
+                              "order) and then this row (bottom: right to left; top: left "
+                              "to right)"),
+        "load": Key("tables", [], keys={
+            "nodes": Key("str", choices=("top", "bottom", "left", "right", "all", "row",
+                                         "column", "ids")),
+            "index": Key("int", 0, ge=0, doc="the row or column (from 0 at bottom/left)"),
+            "ids": Key("ints", [], ge=0, doc="the nodes, with nodes = \"ids\""),
+            "force": Key("vec2", doc="force on each node of the set [N]"),
+            "start": Key("float", 0.0, ge=0.0, doc="[s]"),
+            "end": Key("float", math.inf, gt=0.0, doc="[s]; default: never ends"),
+            "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
+        }, doc="[[body.load]]: a force on a node set over a time window"),
+    }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
+}
+
+
+def check(case):
+    if case["body"]:
+        # Bodies are small: building them is the cheapest complete check.
+        from parmps.solids.mass_spring.build import build_bodies
+        build_bodies(case)
