@@ -1,5 +1,5 @@
 """Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--set S.K=V ...]
-[--check] [--debug] [PETSc options]`` (DESIGN.md §5).
+[--check] [--debug] [PETSc options]`` (docs/design.md §2.3, §5).
 
 Exit status 0 done, 2 bad input (one line on stderr), 1 a run that failed.
 The case is read and validated on rank 0 and the verdict broadcast, so every
@@ -74,7 +74,7 @@ def build_parser():
 
 def prepare_case(args):
     """Read, override and validate the case; returns (case, case_text). Raises CaseError."""
-    from parmps import config
+    from parmps import config, schema
     from parmps.tools import toml
     try:
         with open(args.case, "rb") as handle:
@@ -89,11 +89,35 @@ def prepare_case(args):
     if args.end_time is not None:
         raw.setdefault("time", {})["end"] = args.end_time
     try:
-        case = config.validate(raw)
+        case = schema.validate(raw)
     except CaseError as exc:
         raise CaseError(f"{args.case}: {exc}") from None
+    check_memory(case, args.case)
     changed = bool(args.set) or args.end_time is not None
     return case, toml.dumps(raw) if changed else text
+
+
+def check_memory(case, name):
+    """Refuse a case whose estimated memory exceeds the machine's, before anything is built."""
+    from parmps.run.resources import machine_memory, memory_estimate, particle_estimate
+    needed, available = memory_estimate(case), machine_memory()
+    if available is not None and not needed < available:
+        raise CaseError(f"{name}: the case makes about {particle_estimate(case):.3g} particles "
+                        f"and needs about {needed / 2 ** 30:.3g} GiB, more than this machine's "
+                        f"{available / 2 ** 30:.3g} GiB: use a coarser particles.spacing or a "
+                        f"smaller geometry")
+
+
+def prepare_output(directory):
+    """Create the output directory (rank 0) or say in one line why it cannot be used."""
+    if os.path.exists(directory) and not os.path.isdir(directory):
+        raise CaseError(f"-o {directory}: exists and is not a directory")
+    try:
+        os.makedirs(directory, exist_ok=True)
+    except OSError as exc:
+        raise CaseError(f"-o {directory}: cannot create it ({exc.strerror})") from None
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise CaseError(f"-o {directory}: not writable")
 
 
 def _verdict(comm, action):
@@ -146,26 +170,22 @@ def main(argv=None):
 
 def _run(args, petsc_options, comm):
     case, case_text = _verdict(comm, lambda: prepare_case(args))
-    from parmps.run.solid_run import SolidRun, is_solid_only
-    if is_solid_only(case):
-        Run = SolidRun  # mass-spring bodies alone: no scene, no fluid, no PETSc
-    else:
-        from parmps.run.simulation import Run
+    from parmps.run.simulation import Simulation
     stem = os.path.splitext(os.path.basename(args.case))[0]
     directory = args.output or os.path.join("out", stem)
+    solver_options = {}
     if not args.check and petsc_options:
         from parmps.fluid.ppe import initialise
-        initialise(petsc_options)
+        solver_options = initialise(petsc_options)
+    if not args.check:
+        _verdict(comm, lambda: prepare_output(directory))
     # Geometry is checked while building the scene, on every rank alike.
-    run = Run(case, case_text, comm, directory, end_time=None)
+    run = Simulation(case, case_text, comm, directory, solver_options=solver_options)
     if args.check:
         summary = run.summary()
         if comm.rank == 0:
             print(json.dumps(summary, indent=2))
         return 0
-    if comm.rank == 0:
-        os.makedirs(directory, exist_ok=True)
-    comm.Barrier()
     log.info("case %s: %s particles on %d rank(s), output in %s", args.case,
              ", ".join(f"{v} {k}" for k, v in run.counts.items()), comm.size, directory)
     path = run.execute()

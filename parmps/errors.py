@@ -1,4 +1,4 @@
-"""The two ways a run ends badly, each with its exit status (DESIGN.md §5)."""
+"""The two ways a run ends badly, each with its exit status (docs/design.md §2.3)."""
 
 
 class CaseError(Exception):

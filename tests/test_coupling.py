@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, ROOT, error_lines, run_parmps
-from parmps.io.output import read_frame
+from parmps.io.frames import read_frame
 
 TESTS = Path(__file__).resolve().parent
 ARCHIMEDES = TESTS / "cases" / "archimedes.toml"

@@ -11,7 +11,12 @@ import pytest
 from conftest import CASES, error_lines, run_parmps
 from parmps.fluid import ppe as pressure
 from parmps.tools import analysis
-from parmps.io.output import DIAGNOSTICS, FRAME_FIELDS
+from parmps.io.frames import FRAME_FIELDS
+from parmps.run.driver import DRIVER_DIAGNOSTICS
+from parmps.run.steppers import FluidStepper
+
+# What a fluid run's diagnostics hold: the driver's columns and the fluid stepper's.
+DIAGNOSTICS = tuple(DRIVER_DIAGNOSTICS) + tuple(FluidStepper.DIAGNOSTICS)
 
 # The dam break at a coarse resolution the test budget allows (a = 0.2 m, l0 = a/20).
 COARSE_DAM_BREAK = ["--set", "particles.spacing=0.01"]

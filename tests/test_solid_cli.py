@@ -1,5 +1,5 @@
 """Solid-only cases through the command line: no PETSc, the solids' output
-layout of DESIGN.md §5, and bad bodies refused with one line and exit status 2."""
+layout of docs/design.md §5, and bad bodies refused with one line and exit status 2."""
 
 import pathlib
 import subprocess

@@ -1,4 +1,4 @@
-"""Open boundaries: inflow buffer zones and outlets (DESIGN.md §1.3, kind 4).
+"""Open boundaries: inflow buffer zones and outlets (docs/design.md §1.7, kind 4).
 
 Inlet. A rectangle of ``m`` lattice columns (across the flow) of inflow-buffer
 particles that move rigidly at the uniform velocity U0 (along x or y). Column
@@ -36,6 +36,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.errors import CaseError
+from parmps.fluid.participant import Participant
 from parmps.core.particles import FLUID, INFLOW, Particles
 from parmps.core.scene import lattice_count
 
@@ -139,8 +140,11 @@ class Inlet:
         return columns
 
 
-class OpenBoundaries:
+class OpenBoundaries(Participant):
     """The case's inlets and outlets, applied after every step (collective)."""
+
+    # Cumulative particles that became fluid at the inlets and left through the outlets.
+    DIAGNOSTICS = {"inflow": np.float64, "outflow": np.float64}
 
     def __init__(self, case, comm):
         self.comm = comm
@@ -173,6 +177,12 @@ class OpenBoundaries:
 
     def _in_outflow_zone(self, position, axis, side, start):
         return position[:, axis] < start if side < 0 else position[:, axis] > start
+
+    def before_pressure(self, particles, time, dt):
+        return self.before_step(particles)
+
+    def after_fluid(self, particles, time, dt, decomposition):
+        return self.apply(particles, time + dt, decomposition.owner, dt)
 
     def before_step(self, particles):
         """Remember where the owned outflow-buffer particles start the step.

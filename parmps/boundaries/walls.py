@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
+from parmps.fluid.participant import Participant
 
 SECTIONS = ("tank", "wall_box")
 
@@ -49,7 +50,7 @@ def moving_entries(case):
             for k, spec in enumerate(case.get(section, ())) if any(spec["velocity"])]
 
 
-class MovingWalls:
+class MovingWalls(Participant):
     """The moving tanks and wall boxes of a case, each a block of global ids."""
 
     def __init__(self, case, ids, origin, sources):
@@ -99,6 +100,15 @@ class MovingWalls:
             members = self._members(particles, low, high)
             particles.position[:n][members] += shift
             particles.velocity[:n][members] = shift / dt
+
+    def before_exchange(self, particles, time, dt):
+        self.advance(particles, time, dt)
+
+    def particle_owner(self, particle_id):
+        name = self.name_of(particle_id)
+        if name is None:
+            return None
+        return f"the moving {name}", f"stop it earlier ({name}.move_end) or enlarge the domain"
 
     def name_of(self, particle_id):
         """The moving wall a particle belongs to, or None."""

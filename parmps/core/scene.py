@@ -9,6 +9,7 @@ surface it models, as the fluid's first layer lies half a spacing inside.
 
 import numpy as np
 
+from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.core.neighbours import close_pairs
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
@@ -77,10 +78,10 @@ def wall_box(spec, spacing, name):
 BUILDERS = {"fluid_block": fluid_block, "tank": tank, "wall_box": wall_box}
 
 
-def build(case, bodies=None, open_boundaries=None):
+def build(case, solids=None, open_boundaries=None):
     """All particles of the case, ids 0..N-1 in the order of the case's geometry entries.
 
-    Then the material nodes of ``bodies`` (solid nodes, in body order) and last
+    Then the node particles of ``solids`` (a SolidModel; in body order) and last
     the inflow buffers of ``open_boundaries`` (ids from N, see parmps.boundaries.open).
     Returns the Particles and, for each particle, the index into ``sources`` (the
     names of the geometry entries) that made it.
@@ -103,10 +104,9 @@ def build(case, bodies=None, open_boundaries=None):
         for k, spec in enumerate(case[section]):
             name = f"{section}[{k}]"
             add(name, *builder(spec, spacing, name))
-    if bodies:
-        from parmps.coupling.weak import node_particles
-        nodes = node_particles(bodies)
-        for k, body in enumerate(bodies):
+    if solids is not None:
+        nodes = solids.node_particles()
+        for k, body in enumerate(solids.bodies):
             mine = nodes.body == k
             add(f"body[{k}] '{body.name}'", nodes.position[mine], nodes.kind[mine],
                 nodes.velocity[mine], nodes.body[mine], nodes.node[mine])
@@ -136,7 +136,7 @@ def build(case, bodies=None, open_boundaries=None):
 def check_inside_domain(case, particles, origin, sources):
     lower = np.asarray(case["domain"]["lower"])
     upper = np.asarray(case["domain"]["upper"])
-    outside = np.any((particles.position < lower) | (particles.position > upper), axis=1)
+    outside = outside_box(particles.position, lower, upper)
     if outside.any():
         first = int(np.flatnonzero(outside)[0])
         x, y = particles.position[first]

@@ -1,0 +1,19 @@
+"""Fluid-solid coupling schemes.
+
+``SCHEMES`` is the one place a coupling scheme is registered, by the name the
+case chooses with ``[coupling] scheme``. A scheme is a participant of the fluid
+step (see :class:`parmps.run.steppers.FluidStepper`) that owns the exchange of
+forces and node states between the fluid and the solid model.
+"""
+
+import importlib
+
+SCHEMES = {
+    "weak": "parmps.coupling.weak:WeakCoupling",
+}
+
+
+def coupling_scheme(case, model, comm, fluid):
+    """The case's coupling scheme for ``model`` (a SolidModel) and ``fluid`` (its solver)."""
+    module, attribute = SCHEMES[case["coupling"]["scheme"]].split(":")
+    return getattr(importlib.import_module(module), attribute)(model, comm, fluid)

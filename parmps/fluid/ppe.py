@@ -1,15 +1,28 @@
-"""The pressure Poisson equation on a distributed PETSc AIJ matrix (DESIGN.md §1.2, §2).
+"""The pressure Poisson equation on a distributed PETSc AIJ matrix (docs/design.md).
 
 Rows are the owned unknowns, numbered contiguously per rank (offsets from an
 exclusive scan); ghost unknowns carry their global row number. The matrix is
-built whole-rows-at-once from CSR arrays; the KSP has the options prefix
-``pressure_`` so the case file and the command line (``-pressure_ksp_rtol``)
-reach it, in that order of precedence over the code's defaults.
+built whole-rows-at-once from CSR arrays.
+
+Options. The KSP has the fixed prefix ``pressure_``. Its options come from the
+code's defaults, the case's ``[pressure]`` table and the command line
+(``-pressure_ksp_rtol 1e-10``), in that order of precedence. They are not left
+in PETSc's global options database: they are inserted for each set-up and
+solve of this KSP and removed after, so nothing else sees them and a second
+solver could not inherit them. After the first solve every inserted option is
+asked whether PETSc used it; one it did not (a misspelt name, an option of
+another preconditioner) is reported by name as a warning on rank 0. Options
+without the prefix (``-log_view``) go to PETSc itself at start-up.
 """
 
+import contextlib
+import ctypes
+import glob
 import logging
+import os
+import sys
 
-from parmps.errors import RunFailure
+from parmps.errors import CaseError, RunFailure
 
 log = logging.getLogger(__name__)
 
@@ -18,18 +31,77 @@ OPTIONS_PREFIX = "pressure_"
 
 def _petsc():
     # Imported here so solid-only cases never load PETSc.
-    import petsc4py
+    petsc4py = import_petsc4py()
     if not petsc4py.__dict__.get("_parmps_initialised"):
         petsc4py.init([])
     from petsc4py import PETSc
     return PETSc
 
 
+# Where Debian's python3-petsc4py lives; its .pth file finds it only when PETSC_DIR is set
+# (or petsc-dev is installed), which an activated venv does not do by itself.
+DEBIAN_PETSC_DIRS = "/usr/lib/petscdir/petsc*/*-real"
+
+
+def import_petsc4py():
+    """petsc4py, found without PETSC_DIR where Debian's PETSc is installed."""
+    try:
+        import petsc4py
+        return petsc4py
+    except ModuleNotFoundError:
+        pass
+    candidates = sorted(glob.glob(DEBIAN_PETSC_DIRS))
+    petsc_dir = os.environ.get("PETSC_DIR") or (candidates[-1] if candidates else None)
+    if petsc_dir is None:
+        raise CaseError("petsc4py is not installed: run scripts/setup (Debian's "
+                        "python3-petsc4py) or set PETSC_DIR to a PETSc with petsc4py")
+    os.environ.setdefault("PETSC_DIR", petsc_dir)
+    sys.path.append(os.path.join(petsc_dir, "lib", "python3", "dist-packages"))
+    try:
+        import petsc4py
+    except ModuleNotFoundError:
+        raise CaseError(f"petsc4py is not installed under PETSC_DIR={petsc_dir}: run "
+                        f"scripts/setup (Debian's python3-petsc4py)") from None
+    return petsc4py
+
+
 def initialise(command_line_options):
-    """Start PETSc with the command-line options (e.g. ``-pressure_ksp_rtol 1e-10``)."""
-    import petsc4py
-    petsc4py.init(["parmps"] + list(command_line_options))
+    """Start PETSc with the command-line options that are not the pressure solver's
+    (``-log_view``); returns the pressure solver's, name (without the prefix) -> value."""
+    petsc4py = import_petsc4py()
+    pressure, others = split_solver_options(command_line_options)
+    petsc4py.init(["parmps"] + others)
     petsc4py._parmps_initialised = True
+    return pressure
+
+
+def split_solver_options(tokens):
+    """PETSc command-line tokens as (the pressure solver's options by name without the
+    prefix, every other token). A value follows its name unless it starts with a dash."""
+    pressure, others = {}, []
+    k = 0
+    while k < len(tokens):
+        name = tokens[k]
+        value = None
+        if k + 1 < len(tokens) and not _is_option_name(tokens[k + 1]):
+            value = tokens[k + 1]
+            k += 1
+        k += 1
+        if name.startswith("-" + OPTIONS_PREFIX):
+            pressure[name[1 + len(OPTIONS_PREFIX):]] = value
+        else:
+            others += [name] if value is None else [name, value]
+    return pressure, others
+
+
+def _is_option_name(token):
+    if not token.startswith("-"):
+        return False
+    try:
+        float(token)
+        return False
+    except ValueError:
+        return True
 
 
 # Code defaults per preconditioner, measured on the 40k-particle dam break:
@@ -53,36 +125,107 @@ def option_values(settings, on_command_line):
     return {name: value for name, value in merged.items() if not on_command_line(name)}
 
 
+def _type_names(kind):
+    return {value for name, value in vars(kind).items() if not name.startswith("_")}
+
+
 class PressureSolver:
     """One KSP (CG + GAMG by default) reused for every step's pressure system."""
 
-    def __init__(self, comm, settings):
+    def __init__(self, comm, settings, command_line=None):
+        """``command_line``: the pressure options given there, name (no prefix) -> value."""
         PETSc = _petsc()
         self.PETSc = PETSc
         self.comm = comm
-        options = PETSc.Options()
-        for name, value in option_values(
-                settings, lambda name: options.hasName(OPTIONS_PREFIX + name)).items():
-            options.setValue(OPTIONS_PREFIX + name, value)
+        command_line = dict(command_line or {})
+        self.given = sorted(set(command_line) | {name.lstrip("-") for name in settings["options"]})
+        # The code's defaults follow the preconditioner that will really run.
+        effective = dict(settings, pc_type=command_line.get(
+            "pc_type", settings["options"].get("pc_type", settings["pc_type"])))
+        self.options = option_values(effective, lambda name: name in command_line)
+        self.options.update(command_line)
         self.settings = settings
+        self._check_types(command_line)
+        self.solves = 0
+        self.used = set()
         self.ksp = self._make_ksp()
         self.sizes = None
-        self.solves = 0
         self.reuse_limit = settings["reuse_preconditioner"]
         self.preconditioner_age = 0
         self.fresh_iterations = None
         self.last_iterations = 0
         self.setups = 0
 
+    def _check_types(self, command_line):
+        """Refuse a KSP or PC type PETSc does not have, naming where it was given."""
+        PETSc = self.PETSc
+        for kind, known in (("ksp_type", _type_names(PETSc.KSP.Type)),
+                            ("pc_type", _type_names(PETSc.PC.Type))):
+            if kind in command_line:
+                value, where = command_line[kind], f"-{OPTIONS_PREFIX}{kind}"
+            elif kind in self.options:
+                value, where = self.options[kind], f"pressure.options.{kind}"
+            else:
+                value, where = self.settings[kind], f"pressure.{kind}"
+            if value not in known:
+                raise CaseError(f"{where} = {value!r}: PETSc has no such type (e.g. "
+                                f"{', '.join(sorted(known)[:8])}, ...)")
+
+    @contextlib.contextmanager
+    def _options_inserted(self, report_unused=False):
+        """The solver's options in PETSc's database for the block, removed after; with
+        ``report_unused``, those PETSc did not use in the block are reported."""
+        database = self.PETSc.Options()
+        names = [OPTIONS_PREFIX + name for name in self.options]
+        for name, value in zip(names, self.options.values()):
+            database.setValue(name, value)
+        try:
+            yield
+            self._note_used(names)
+            if report_unused:
+                self._report_unused(names)
+        finally:
+            for name in names:
+                database.delValue(name)
+
+    def _note_used(self, names):
+        """Remember which options PETSc has read (its flag goes with the option's removal)."""
+        flag = ctypes.c_int(0)
+        library = ctypes.CDLL(self.PETSc.__file__)
+        for name in names:
+            library.PetscOptionsUsed(None, name.encode(), ctypes.byref(flag))
+            if flag.value:
+                self.used.add(name)
+
+    def _report_unused(self, names):
+        unused = ["-" + name for name in names if name not in self.used]
+        if unused and self.comm.rank == 0:
+            log.warning("PETSc option%s %s not used by the pressure solver (%s): misspelt, or "
+                        "meant for another solver type", "s" if len(unused) > 1 else "",
+                        ", ".join(unused) + (" were" if len(unused) > 1 else " was"),
+                        self.describe())
+
     def _make_ksp(self):
+        PETSc = self.PETSc
         settings = self.settings
-        ksp = self.PETSc.KSP().create(comm=self.comm)
+        ksp = PETSc.KSP().create(comm=self.comm)
         ksp.setOptionsPrefix(OPTIONS_PREFIX)
         ksp.setType(settings["ksp_type"])
         ksp.getPC().setType(settings["pc_type"])
         ksp.setTolerances(rtol=settings["rtol"], atol=1e-50, max_it=settings["max_iterations"])
         ksp.setInitialGuessNonzero(True)
-        ksp.setFromOptions()
+        # PETSc's own handler would print its error stack; the error is reported as
+        # one line instead.
+        PETSc.Sys.pushErrorHandler("ignore")
+        try:
+            with self._options_inserted():
+                ksp.setFromOptions()
+        except PETSc.Error as error:
+            named = ", ".join("-" + OPTIONS_PREFIX + name for name in self.given or self.options)
+            raise CaseError(f"the pressure solver's PETSc options were refused (PETSc error "
+                            f"{error.ierr}): check {named}") from None
+        finally:
+            PETSc.Sys.popErrorHandler()
         return ksp
 
     def describe(self):
@@ -124,7 +267,10 @@ class PressureSolver:
                  and self.last_iterations <= 1.5 * self.fresh_iterations + 2)
         self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(matrix)
-        self.ksp.solve(b, x)
+        # The first solve sets the preconditioner up, which reads the rest of the options.
+        with self._options_inserted(report_unused=self.solves == 0):
+            self.ksp.solve(b, x)
+        self.solves += 1
         reason = self.ksp.getConvergedReason()
         iterations = self.ksp.getIterationNumber()
         residual = self.ksp.getResidualNorm()
@@ -138,7 +284,6 @@ class PressureSolver:
             self.setups += 1
         for item in (matrix, b, x):
             item.destroy()
-        self.solves += 1
         if reason < 0:
             raise RunFailure(f"pressure solve diverged at step {step}: {_reason_name(PETSc, reason)}"
                              f" after {iterations} iterations (residual {residual:.3e})")

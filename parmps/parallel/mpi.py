@@ -141,11 +141,18 @@ def launch_environment(environ=None):
 
     Importing mpi4py initialises MPI as a singleton, which puts launcher
     variables into the C environment that ``subprocess`` passes on by default;
-    ``os.environ`` is the copy from before, minus any launcher variables.
+    ``os.environ`` is the copy from before, minus any launcher variables, plus
+    Open MPI's consent to run as root when this process is root.
     """
     environ = dict(os.environ if environ is None else environ)
-    return {key: value for key, value in environ.items()
-            if not key.startswith(_LAUNCH_VARIABLES)}
+    clean = {key: value for key, value in environ.items()
+             if not key.startswith(_LAUNCH_VARIABLES)}
+    if os.geteuid() == 0:
+        # Open MPI refuses root without both; a root user running parmps's own
+        # launchers (bench, tests) has accepted that by running them.
+        clean.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        clean.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    return clean
 
 
 def run_mpirun(ranks, argv, timeout, **kwargs):

@@ -11,9 +11,9 @@ import sys
 from mpi4py import MPI
 
 from parmps import cli
-from parmps.solids.mass_spring import body as solid
+from parmps.solids.mass_spring import model as solid
 
-_advance = solid.SolidSystem.advance
+_advance = solid.MassSpringModel.advance
 _calls = {"count": 0}
 
 
@@ -25,5 +25,5 @@ def faulty_advance(self, *args, **kwargs):
     return _advance(self, *args, **kwargs)
 
 
-solid.SolidSystem.advance = faulty_advance
+solid.MassSpringModel.advance = faulty_advance
 sys.exit(cli.main(sys.argv[1:]))

@@ -1,4 +1,4 @@
-"""Mass-spring solids that keep their area (DESIGN.md §1.4-1.5).
+"""Mass-spring solids that keep their area (docs/design.md §1.5).
 
 Physics on plain numpy arrays: spring, damping and external forces, the area
 of a body's boundary polygon and its gradient, the Lagrange multiplier that
@@ -20,7 +20,7 @@ known when the force is needed):
     v_{n+1}  = v_half + dt/2 a_{n+1}
 
 The next position is then x_{n+2} = x_{n+1} + dt v_half + dt^2 a_{n+1}, which
-is exactly the prediction the DESIGN.md §1.5 multiplier zeroes to first order
+is exactly the prediction the docs/design.md §1.5 multiplier zeroes to first order
 when its ``qdot`` is the half-step velocity:
 
     lambda = [Phi/dt^2 + gradPhi . (qdot/dt + M^-1 F)] / (gradPhi . M^-1 gradPhi)
@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from parmps.errors import CaseError, RunFailure
+from parmps.errors import CaseError
 
 log = logging.getLogger(__name__)
 
@@ -115,7 +115,7 @@ def area_gradient(position, loop):
 
 
 def area_multiplier(phi, gradient, velocity, inverse_mass, force, dt):
-    """The Lagrange multiplier of DESIGN.md §1.5 (seed eq. 12 with Phi_t = 0).
+    """The Lagrange multiplier of docs/design.md §1.5 (seed eq. 12 with Phi_t = 0).
 
     ``gradient``, ``velocity``, ``force`` are (m, 2) on the loop nodes and
     ``inverse_mass`` (m,) (0 for pinned nodes). The constraint force is
@@ -138,7 +138,7 @@ def stiffest_frequency(mass, springs, stiffness, damping=None):
     """Upper bounds of the highest angular frequency and damping rate of the network.
 
     For every node ``sum_j k_ij (1/m_i + 1/sqrt(m_i m_j))``; its maximum bounds
-    the largest eigenvalue of M^-1 K (with equal masses it is twice DESIGN.md's
+    the largest eigenvalue of M^-1 K (with equal masses it is twice the textbook
     ``sum_j k_ij / m_i``: two equal masses on one spring oscillate at
     sqrt(2k/m), not sqrt(k/m), so the plain node sum is not a safe bound).
     The same sum over ``b_ij`` bounds the damping rate. Pinned nodes should be
@@ -309,84 +309,3 @@ class Body:
             self.acceleration = self.acceleration_at(time + (step + 1) * h, velocity, h)
             velocity += 0.5 * h * self.acceleration
         return n_sub
-
-
-class SolidSystem:
-    """Every mass-spring body of a case, advanced together by the driver.
-
-    ``advance(t, dt_outer, fluid_force)`` runs each body's own substeps with
-    the fluid force held constant (the weak coupling of DESIGN.md §1.6). Bodies
-    are independent, so a later parallel version can give each to one rank.
-    """
-
-    def __init__(self, bodies, substep=0.0, safety=0.5, constraint_prediction="linear"):
-        self.bodies = list(bodies)
-        for body in self.bodies:
-            body.quadratic_prediction = constraint_prediction == "quadratic"
-        self.safety = float(safety)
-        self.fixed_substep = float(substep)
-        self.substeps = {body.name: self._substep_of(body) for body in self.bodies}
-        self.last_substep_counts = {body.name: 0 for body in self.bodies}
-
-    def _substep_of(self, body):
-        limit = body.stability_limit()
-        if self.fixed_substep > 0.0:
-            if self.fixed_substep >= limit:
-                raise CaseError(f"solid.substep ({self.fixed_substep:.6g} s) is above the "
-                                f"stability limit of body '{body.name}' ({limit:.6g} s from its "
-                                f"stiffest node); use at most {self.safety * limit:.3g} s or "
-                                f"0 for automatic")
-            return self.fixed_substep
-        return self.safety * limit
-
-    @classmethod
-    def from_case(cls, case):
-        from parmps.solids.mass_spring.build import build_bodies
-        solid = case.get("solid", {})
-        return cls(build_bodies(case), substep=solid.get("substep", 0.0),
-                   safety=solid.get("safety", 0.5),
-                   constraint_prediction=solid.get("constraint_prediction", "linear"))
-
-    def __len__(self):
-        return len(self.bodies)
-
-    def __iter__(self):
-        return iter(self.bodies)
-
-    def body(self, name):
-        for body in self.bodies:
-            if body.name == name:
-                return body
-        raise KeyError(name)
-
-    def stable_substep(self):
-        """The smallest substep any body uses [s]."""
-        return min(self.substeps.values(), default=math.inf)
-
-    def substep_counts(self, dt_outer):
-        return {name: substep_count(dt_outer, dt) for name, dt in self.substeps.items()}
-
-    def advance(self, time, dt_outer, fluid_force=None):
-        """Advance every body from ``time`` by ``dt_outer``.
-
-        ``fluid_force`` maps a body name to an (n_nodes, 2) force on its nodes,
-        held constant over the substeps; bodies not named feel none.
-        Returns the substep count of every body.
-        """
-        fluid_force = fluid_force or {}
-        for body in self.bodies:
-            force = fluid_force.get(body.name)
-            body.fluid_force[:] = 0.0 if force is None else force
-            self.last_substep_counts[body.name] = body.advance(time, dt_outer,
-                                                               self.substeps[body.name])
-            if not np.all(np.isfinite(body.position)):
-                raise RunFailure(f"body '{body.name}' became non-finite at t = "
-                                 f"{time + dt_outer:.6g} s")
-        return dict(self.last_substep_counts)
-
-    def diagnostics(self):
-        """Per body: volume_error, centroid (2,), fluid_force (2,)."""
-        return {body.name: {"volume_error": body.volume_error(),
-                            "centroid": body.centroid(),
-                            "fluid_force": body.total_fluid_force()}
-                for body in self.bodies}

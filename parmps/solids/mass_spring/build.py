@@ -22,6 +22,7 @@ import logging
 
 import numpy as np
 
+from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 
@@ -267,7 +268,7 @@ def build_body(k, spec, gravity, domain=None):
     if domain is not None:
         lower, upper = np.asarray(domain["lower"]), np.asarray(domain["upper"])
         every = np.concatenate([position, anchors])
-        outside = np.any((every < lower) | (every > upper), axis=1)
+        outside = outside_box(every, lower, upper)
         if outside.any():
             x, y = every[np.flatnonzero(outside)[0]]
             raise CaseError(f"{label} has {int(outside.sum())} nodes outside the domain, "

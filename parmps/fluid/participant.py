@@ -1,0 +1,49 @@
+"""What takes part in a fluid step besides the fluid: walls that move, open boundaries, bodies.
+
+The fluid stepper (:class:`parmps.run.steppers.FluidStepper`) calls every
+participant at three fixed points of a step, in the order the participants
+were given; a participant overrides the hooks it needs. A new kind of boundary
+or coupling is a new participant, not a new branch in the step.
+
+1. ``before_exchange(particles, time, dt)``: owned particles only, before
+   migration and the halo (a moving wall moves here, so its particles migrate
+   like any other).
+2. ``before_pressure(particles, time, dt)``: owned particles and ghosts, before
+   the projection; returns an owned-length mask of particles to hold at P = 0
+   (an outlet's pressure reference), or None.
+3. ``after_fluid(particles, time, dt, decomposition)``: after the projection;
+   returns the particles (an open boundary adds and removes some: then owned
+   only).
+
+``check(particles, step, time)`` stops a step that went wrong for the
+participant (a blown-up body). ``speed(time, until)`` is the largest speed the participant moves particles at
+over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
+and ``diagnostics()`` add columns to the run's diagnostics;
+``particle_owner(pid)`` names the geometry a particle belongs to and what to
+do about it, for messages: ``(description, advice)`` or None.
+"""
+
+
+class Participant:
+    DIAGNOSTICS = {}  # column name -> numpy dtype
+
+    def before_exchange(self, particles, time, dt):
+        pass
+
+    def before_pressure(self, particles, time, dt):
+        return None
+
+    def after_fluid(self, particles, time, dt, decomposition):
+        return particles
+
+    def speed(self, time, until):
+        return 0.0
+
+    def check(self, particles, step, time):
+        """After the step: raise RunFailure if what this participant moves went wrong."""
+
+    def diagnostics(self):
+        return {}
+
+    def particle_owner(self, particle_id):
+        return None

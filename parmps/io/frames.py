@@ -1,0 +1,99 @@
+"""Particle frames in result.h5, each one array sorted by global id whatever the rank count.
+
+``/frames/<step, 8 digits>`` holds ``FRAME_FIELDS`` of every particle and the
+attributes ``time``, ``step`` and ``dt``; with bodies, ``/frames/<step>/solids/
+<body>/position`` and ``velocity`` hold every node (anchors included) in the
+body's own order, and ``/solids/<body>/springs`` the mesh once.
+"""
+
+import os
+
+import numpy as np
+
+from parmps.io.xdmf import write_xdmf
+from parmps.parallel.slabs import by_id_blocks
+
+FRAME_FIELDS = ("id", "kind", "position", "velocity", "pressure", "number_density")
+FRAME_ATTRIBUTES = ("time", "step", "dt")
+
+
+class FrameWriter:
+    """Writes frames into a :class:`~parmps.io.result.ResultFile` and keeps its XDMF current."""
+
+    def __init__(self, result, dimension=2, solids=None):
+        self.result = result
+        self.comm = result.comm
+        self.dimension = dimension
+        self.solids = solids
+        self.frames = result.file.create_group("frames")
+        self.frame_list = []  # (step, time, total particles)
+        self.bodies = []
+        if solids is not None:
+            root = result.file.require_group("solids")
+            for k, body in enumerate(solids.bodies):
+                group = root.require_group(body.name)
+                springs = solids.springs(k)
+                dataset = group.create_dataset("springs", shape=springs.shape, dtype=np.int64)
+                for key, value in solids.attributes(k).items():
+                    group.attrs[key] = value
+                if self.comm.rank == 0:
+                    dataset[...] = springs
+                self.bodies.append((body.name, len(body.position), len(springs)))
+
+    def write(self, step, time, dt, particles):
+        """Write the owned particles (and every body's nodes) as /frames/<step>; collective.
+
+        The particles are first regrouped by blocks of ids, so the frame is one
+        array in ascending id whatever the rank count.
+        """
+        owned, offset, total = by_id_blocks(particles, self.comm)
+        count = len(owned)
+        group = self.frames.create_group(f"{step:08d}")
+        group.attrs["time"] = time
+        group.attrs["step"] = step
+        group.attrs["dt"] = dt
+        for name in FRAME_FIELDS:
+            data = owned.arrays[name]
+            dataset = group.create_dataset(name, shape=(total,) + data.shape[1:],
+                                           dtype=data.dtype)
+            if count:
+                dataset[offset:offset + count] = data
+        if self.solids is not None:
+            solids = group.create_group("solids")
+            for body in self.solids.bodies:
+                sub = solids.create_group(body.name)
+                for key in ("position", "velocity"):
+                    data = getattr(body, key)
+                    dataset = sub.create_dataset(key, shape=data.shape, dtype=np.float64)
+                    if self.comm.rank == 0:
+                        dataset[...] = data
+        self.frame_list.append((step, time, total))
+
+    def publish(self):
+        """Flush the file and rewrite the XDMF so readers see every frame written so far."""
+        self.result.file.flush()
+        if self.comm.rank == 0:
+            write_xdmf(self.result.xdmf_path, os.path.basename(self.result.path),
+                       self.frame_list, self.dimension, self.bodies)
+
+
+def read_frame(path, step=None):
+    """One frame of a result file as a dict of arrays sorted by id (the last frame by default)."""
+    import h5py
+    with h5py.File(path, "r") as handle:
+        names = sorted(handle["frames"])
+        return _frame(handle["frames"][names[-1] if step is None else f"{step:08d}"])
+
+
+def read_frames(path):
+    """Every frame of a result file, each a dict of arrays sorted by id."""
+    import h5py
+    with h5py.File(path, "r") as handle:
+        return [_frame(handle["frames"][name]) for name in sorted(handle["frames"])]
+
+
+def _frame(group):
+    order = np.argsort(group["id"][()], kind="stable")
+    data = {field: group[field][()][order] for field in FRAME_FIELDS}
+    data.update({key: group.attrs[key] for key in FRAME_ATTRIBUTES})
+    return data

@@ -1,0 +1,84 @@
+"""The XDMF sidecar of result.h5: what ParaView opens.
+
+Two temporal collections: ``particles``, one point cloud per frame with every
+particle array, and (for a case with bodies) ``springs``, every body's springs
+as 2-node polylines at the same times, so ParaView draws the bodies' meshes.
+The file is rewritten whole after each frame through a temporary file, so a
+run that stops at any moment leaves a sidecar that names only written frames.
+"""
+
+import os
+
+GEOMETRY_TYPES = {2: "XY", 3: "XYZ"}
+
+
+def _particle_grid(h5_name, step, time, total, dimension):
+    base = f"{h5_name}:/frames/{step:08d}"
+
+    def item(name, dims, number="Float", precision=8):
+        return (f'<DataItem Dimensions="{dims}" NumberType="{number}" '
+                f'Precision="{precision}" Format="HDF">{base}/{name}</DataItem>')
+
+    d = dimension
+    return f"""      <Grid Name="step {step}" GridType="Uniform">
+        <Time Value="{time:.10g}"/>
+        <Topology TopologyType="Polyvertex" NumberOfElements="{total}" NodesPerElement="1"/>
+        <Geometry GeometryType="{GEOMETRY_TYPES[d]}">{item("position", f"{total} {d}")}</Geometry>
+        <Attribute Name="pressure" AttributeType="Scalar" Center="Node">{item("pressure", total)}</Attribute>
+        <Attribute Name="velocity" AttributeType="Vector" Center="Node">{item("velocity", f"{total} {d}")}</Attribute>
+        <Attribute Name="number_density" AttributeType="Scalar" Center="Node">{item("number_density", total)}</Attribute>
+        <Attribute Name="kind" AttributeType="Scalar" Center="Node">{item("kind", total, "Char", 1)}</Attribute>
+        <Attribute Name="id" AttributeType="Scalar" Center="Node">{item("id", total, "Int", 8)}</Attribute>
+      </Grid>"""
+
+
+def _spring_collection(h5_name, frames, bodies, dimension):
+    """Every body's springs as 2-node polylines, one spatial collection per frame.
+
+    ``bodies``: (name, nodes, springs) per body.
+    """
+    d = dimension
+    steps = []
+    for step, time, _ in frames:
+        grids = []
+        for name, n_nodes, n_springs in bodies:
+            base = f"{h5_name}:/frames/{step:08d}/solids/{name}"
+            grids.append(f"""          <Grid Name="{name}" GridType="Uniform">
+            <Topology TopologyType="Polyline" NumberOfElements="{n_springs}" NodesPerElement="2">
+              <DataItem Dimensions="{n_springs} 2" NumberType="Int" Precision="8" Format="HDF">{h5_name}:/solids/{name}/springs</DataItem>
+            </Topology>
+            <Geometry GeometryType="{GEOMETRY_TYPES[d]}">
+              <DataItem Dimensions="{n_nodes} {d}" NumberType="Float" Precision="8" Format="HDF">{base}/position</DataItem>
+            </Geometry>
+            <Attribute Name="velocity" AttributeType="Vector" Center="Node">
+              <DataItem Dimensions="{n_nodes} {d}" NumberType="Float" Precision="8" Format="HDF">{base}/velocity</DataItem>
+            </Attribute>
+          </Grid>""")
+        steps.append(f"""      <Grid Name="solids step {step}" GridType="Collection" CollectionType="Spatial">
+        <Time Value="{time:.10g}"/>
+""" + "\n".join(grids) + """
+      </Grid>""")
+    return ("""    <Grid Name="springs" GridType="Collection" CollectionType="Temporal">
+""" + "\n".join(steps) + """
+    </Grid>
+""")
+
+
+def write_xdmf(path, h5_name, frames, dimension=2, bodies=()):
+    """Write the sidecar for ``frames`` ((step, time, particle count) each) and ``bodies``."""
+    grids = [_particle_grid(h5_name, step, time, total, dimension)
+             for step, time, total in frames]
+    text = ("""<?xml version="1.0" ?>
+<!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>
+<Xdmf Version="2.0">
+  <Domain>
+    <Grid Name="particles" GridType="Collection" CollectionType="Temporal">
+""" + "\n".join(grids) + """
+    </Grid>
+""" + (_spring_collection(h5_name, frames, bodies, dimension) if bodies else "") + """  </Domain>
+</Xdmf>
+""")
+    temporary = path + ".tmp"
+    with open(temporary, "w") as handle:
+        handle.write(text)
+    os.replace(temporary, path)

@@ -1,0 +1,82 @@
+"""The one time loop of every run: fluid-only, solid-only and coupled.
+
+A run is a :class:`RunState` (time, step, the last dt, the particles, the
+diagnostics of the last step), one stepper that advances it (see
+:mod:`parmps.run.steppers`) and observers that look at it after each step,
+each at its own cadence (see :mod:`parmps.run.observers`). The loop knows
+nothing of what a step does or what is written.
+"""
+
+import logging
+from dataclasses import dataclass, field
+
+from parmps.core.particles import Particles
+from parmps.errors import CaseError, RunFailure
+from parmps.parallel.mpi import abort_on_exception
+from parmps.run.schedule import Stopwatch
+from parmps.run.timestep import choose_dt
+
+log = logging.getLogger("parmps.run")
+
+
+@dataclass
+class RunState:
+    time: float = 0.0
+    step: int = 0
+    dt: float = 0.0  # the last step's length
+    particles: Particles = field(default_factory=Particles.empty)
+    diagnostics: dict = field(default_factory=dict)  # the last step's row
+    particle_steps: int = 0
+    elapsed: float = 0.0  # wall seconds in the loop so far
+
+
+DRIVER_DIAGNOSTICS = {"step": "int64", "time": "float64", "dt": "float64",
+                      "wall_seconds": "float64"}
+
+
+def advance(comm, state, stepper, observers, end, time_settings):
+    """Step ``state`` until ``end`` says stop; observers see every step. Returns the state."""
+    watch = Stopwatch()
+    total_particles = comm.allreduce(state.particles.n_owned)
+    stepper.start(state)
+    for observer in observers:
+        observer.start(state)
+    while end.running(state.time, state.step):
+        dt = end.clip(state.time, choose_dt(time_settings, stepper.dt_limits(state),
+                                            state.step + 1))
+        stepper.advance(state, dt)
+        state.time += dt
+        state.step += 1
+        state.dt = dt
+        stepper.check(state)
+        state.particle_steps += total_particles
+        state.elapsed = watch.elapsed()
+        state.diagnostics = {"step": state.step, "time": state.time, "dt": dt,
+                             "wall_seconds": state.elapsed, **stepper.diagnostics(state)}
+        for observer in observers:
+            observer.observe(state)
+    state.elapsed = watch.elapsed()
+    return state
+
+
+def run_collectively(comm, result, observers, state, loop):
+    """Run ``loop()``, then let the observers finish and close ``result`` on every rank,
+    marked complete or not.
+
+    An unexpected exception on one rank aborts the job: the collective close
+    would otherwise wait for ranks still inside the loop. Case errors and run
+    failures are raised on every rank together, so they close normally and keep
+    the frames already written.
+    """
+    complete = False
+    try:
+        with abort_on_exception(comm, passthrough=(CaseError, RunFailure)):
+            loop()
+        complete = True
+    finally:
+        try:
+            for observer in observers:
+                observer.finish(state)
+        finally:
+            result.close(complete)
+    return result.path

@@ -1,0 +1,57 @@
+"""What a case will ask of the machine, known before anything is allocated.
+
+The particle count comes from the case's geometry alone (each fluid block,
+tank and wall box is a rectangle of the lattice), so a case that would need
+more memory than the machine has is refused with a sentence instead of dying
+in an allocation.
+"""
+
+import math
+import os
+
+from parmps.core.settings import search_radius
+
+# Per particle: the fields (~80 bytes), a step's temporaries (~320 bytes), and per
+# neighbour within the search radius the pair index (8 bytes), its share of the pair
+# geometry and of the kernels' temporaries (24) and of the matrix entry (12 + 8).
+_BYTES_PER_PARTICLE = 400
+_BYTES_PER_PAIR = 52
+
+
+def particle_estimate(case):
+    """About how many particles the case's geometry makes (walls and dummies included)."""
+    spacing = case["particles"]["spacing"]
+    if spacing is None:
+        return sum(max(spec["nx"], 1) * max(spec["ny"], 1) for spec in case.get("body", ()))
+    area = 0.0
+    for block in case.get("fluid_block", ()):
+        area += math.prod(u - l for u, l in zip(block["upper"], block["lower"]))
+    for spec in case.get("tank", ()):
+        thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
+        width = spec["upper"][0] - spec["lower"][0] + 2 * thick
+        height = spec["upper"][1] - spec["lower"][1] + thick * (1 if spec["open_top"] else 2)
+        area += width * height - (width - 2 * thick) * (height - thick
+                                                         * (1 if spec["open_top"] else 2))
+    for spec in case.get("wall_box", ()):
+        area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
+    for spec in case.get("inlet", ()):
+        area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
+    return area / spacing ** case.get("dimension", 2)
+
+
+def memory_estimate(case):
+    """Bytes a run of the case needs, about (pair lists dominate)."""
+    particles = particle_estimate(case)
+    spacing = case["particles"]["spacing"]
+    if spacing is None:
+        return particles * _BYTES_PER_PARTICLE
+    neighbours = math.pi * (search_radius(case) / spacing) ** 2
+    return particles * (_BYTES_PER_PARTICLE + neighbours * _BYTES_PER_PAIR)
+
+
+def machine_memory():
+    """Physical memory of this machine in bytes (None where the system does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None

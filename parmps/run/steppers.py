@@ -1,0 +1,213 @@
+"""Steppers: what advances a run's state by dt, and the limits their stability puts on dt.
+
+A stepper has ``DIAGNOSTICS`` (its own columns, name -> dtype), ``start(state)``,
+``dt_limits(state)`` (a list of :class:`~parmps.run.timestep.Limit`),
+``advance(state, dt)`` (from ``state.time``; the step is ``state.step + 1``),
+``check(state)`` (after the step: stop loudly if it went wrong),
+``diagnostics(state)`` and ``progress(state)`` (a progress line's text).
+
+- :class:`FluidStepper`: one MPS projection step of the particles, with the
+  decomposition's update and every participant of the step (moving walls, a
+  coupling with bodies, open boundaries: :mod:`parmps.fluid.participant`).
+- :class:`SolidStepper`: bodies alone (no fluid, no PETSc): the solid model's
+  substeps fill each step.
+"""
+
+import logging
+
+import numpy as np
+
+from parmps.core.geometry import outside_box
+from parmps.core.particles import FLUID
+from parmps.errors import RunFailure
+from parmps.fluid.projection import check_finite, max_speed
+from parmps.run import guards
+from parmps.run.timestep import Limit
+
+log = logging.getLogger(__name__)
+
+
+class FluidStepper:
+    """The particles' MPS step on a decomposition, with the step's participants."""
+
+    DIAGNOSTICS = {"ksp_iterations": np.int64, "ksp_residual": np.float64,
+                   "max_speed": np.float64, "kinetic_energy": np.float64,
+                   "n_fluid": np.int64,
+                   # largest rank's owned particle count over the mean
+                   "imbalance": np.float64}
+
+    def __init__(self, case, comm, decomposition, fluid, participants):
+        self.case = case
+        self.comm = comm
+        self.decomposition = decomposition
+        self.fluid = fluid
+        self.participants = list(participants)
+        self.spacing = case["particles"]["spacing"]
+        self.lower = np.asarray(case["domain"]["lower"])
+        self.upper = np.asarray(case["domain"]["upper"])
+        self.DIAGNOSTICS = dict(self.DIAGNOSTICS)
+        for participant in self.participants:
+            self.DIAGNOSTICS.update(participant.DIAGNOSTICS)
+        self.fluid_speed = 0.0
+        self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0}
+
+    def start(self, state):
+        # The largest fluid speed; the check after each step measures it for the next.
+        self.fluid_speed = max_speed(state.particles, self.comm)
+
+    def speed(self, time):
+        """The speed the next step's dt must respect: the fluid's and every participant's."""
+        settings = self.case["time"]
+        horizon = settings["fixed_dt"] or settings["dt_max"]
+        return max([self.fluid_speed] + [participant.speed(time, time + horizon)
+                                         for participant in self.participants])
+
+    def dt_limits(self, state):
+        settings = self.case["time"]
+        limits = []
+        speed = self.speed(state.time)
+        if speed > 0:
+            limits.append(Limit("Courant", settings["cfl"] * self.spacing / speed,
+                                f"max speed {speed:.4g} m/s needs dt <= "
+                                f"{settings['cfl'] * self.spacing / speed:.4g} s "
+                                f"(time.cfl = {settings['cfl']:g})"))
+        viscosity = self.fluid.constants.viscosity
+        if viscosity > 0:
+            seconds = settings["viscous_number"] * self.spacing ** 2 / viscosity
+            limits.append(Limit("viscous", seconds,
+                                f"fluid.viscosity = {viscosity:g} m^2/s needs dt <= "
+                                f"time.viscous_number x spacing^2 / viscosity = {seconds:.4g} s"))
+        return limits
+
+    def advance(self, state, dt):
+        step = state.step + 1
+        time = state.time
+        particles = state.particles
+        for participant in self.participants:
+            participant.before_exchange(particles, time, dt)
+        timers = self.fluid.timers
+        timers.start("halo")
+        particles = self.decomposition.update(particles, step)
+        timers.stop()
+        dirichlet = None
+        for participant in self.participants:
+            mask = participant.before_pressure(particles, time, dt)
+            if mask is not None:
+                dirichlet = mask if dirichlet is None else dirichlet | mask
+        self.stats = self.fluid.step(particles, dt, step, dirichlet)
+        for participant in self.participants:
+            particles = participant.after_fluid(particles, time, dt, self.decomposition)
+        state.particles = particles
+
+    def check(self, state):
+        """Stop loudly on NaN, a particle leaving the domain or going through a wall, or a
+        Courant breach; measures the largest fluid speed for the next step."""
+        comm = self.comm
+        particles = state.particles
+        step = state.step
+        check_finite(particles, comm, step)
+        for participant in self.participants:
+            participant.check(particles, step, state.time)
+        n = particles.n_owned
+        position = particles.position[:n]
+        outside = outside_box(position, self.lower, self.upper)
+        local = (int(particles.id[:n][outside][0]),) + tuple(position[outside][0]) \
+            if np.any(outside) else None
+        escaped = [item for item in comm.allgather(local) if item is not None]
+        if escaped:
+            pid, *where = min(escaped)
+            at = ", ".join(f"{x:.4g}" for x in where)
+            for participant in self.participants:
+                owner = participant.particle_owner(pid)
+                if owner is not None:
+                    description, advice = owner
+                    raise RunFailure(f"step {step}: particle {pid} of {description} left the "
+                                     f"domain at ({at}); {advice}")
+            raise RunFailure(f"step {step}: particle {pid} left the domain at ({at}) "
+                             f"(through a wall, or the domain is too small)")
+        speed = max_speed(particles, comm)
+        courant = speed * state.dt / self.spacing
+        if courant > 1.0:
+            raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
+                             f"{speed:.4g} m/s, dt {state.dt:.3g} s): particles jump more than a "
+                             f"spacing per step; the run is unstable")
+        # After the Courant check: a particle that jumped into a wall because the
+        # step was too long should be reported as the Courant breach it is.
+        guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),
+                                      self.spacing, comm, step)
+        self.fluid_speed = speed
+
+    def diagnostics(self, state):
+        comm = self.comm
+        particles = state.particles
+        n = particles.n_owned
+        fluid = particles.kind[:n] == FLUID
+        constants = self.fluid.constants
+        kinetic = comm.allreduce(0.5 * constants.density * self.spacing ** 2 *
+                                 float((particles.velocity[:n][fluid] ** 2).sum()))
+        values = {"ksp_iterations": self.stats["ksp_iterations"],
+                  "ksp_residual": self.stats["ksp_residual"],
+                  "max_speed": self.fluid_speed, "kinetic_energy": kinetic,
+                  "n_fluid": comm.allreduce(int(np.count_nonzero(fluid))),
+                  "imbalance": self.decomposition.imbalance(particles)}
+        for participant in self.participants:
+            values.update(participant.diagnostics())
+        return values
+
+    def progress(self, state):
+        return f"ksp {self.stats['ksp_iterations']} its"
+
+    def summary(self, state):
+        return ""
+
+
+class SolidStepper:
+    """Bodies alone: every rank advances every (small) body alike; rank 0 holds the nodes
+    as its particles, for the frames."""
+
+    DIAGNOSTICS = {"max_speed": np.float64, "kinetic_energy": np.float64}
+
+    def __init__(self, case, comm, model):
+        self.case = case
+        self.comm = comm
+        self.model = model
+        self.lower = np.asarray(case["domain"]["lower"])
+        self.upper = np.asarray(case["domain"]["upper"])
+
+    def start(self, state):
+        pass
+
+    def dt_limits(self, state):
+        # The substeps hold the bodies' stability; the outer step only paces the output.
+        return []
+
+    def advance(self, state, dt):
+        try:
+            self.model.advance(state.time, dt)
+        except RunFailure as exc:
+            # The solver knows the time, the loop the step: name both.
+            raise RunFailure(f"step {state.step + 1}: {exc}") from None
+        if self.comm.rank == 0:
+            state.particles = self.model.node_particles(every_node=True)
+
+    def check(self, state):
+        self.model.check(state.step, state.time)
+        for body in self.model.bodies:
+            outside = outside_box(body.position, self.lower, self.upper)
+            if outside.any():
+                node = int(np.flatnonzero(outside)[0])
+                at = ", ".join(f"{x:.4g}" for x in body.position[node])
+                raise RunFailure(f"step {state.step}: node {node} of body '{body.name}' left "
+                                 f"the domain at ({at})")
+
+    def diagnostics(self, state):
+        return {"max_speed": self.model.max_speed(),
+                "kinetic_energy": self.model.kinetic_energy()}
+
+    def progress(self, state):
+        return "  ".join(f"{name}: volume error {values['volume_error']:.3e}"
+                         for name, values in self.model.series().items())
+
+    def summary(self, state):
+        return "; " + ", ".join(f"{name} volume error {values['volume_error']:.3e}"
+                                for name, values in self.model.series().items())

@@ -1,0 +1,197 @@
+"""The mass-spring model: every body of a case, behind the SolidModel interface.
+
+Bodies are built by :mod:`parmps.solids.mass_spring.build` and advanced by
+their own Verlet substeps (:mod:`parmps.solids.mass_spring.body`), each with
+the longest substep its stiffest node allows times a safety factor, or a fixed
+one. The run guard here stops a body that has blown up: non-finite nodes, an
+area constraint that lost control (``VOLUME_ERROR_LIMIT``) or springs
+stretched far beyond anything linear springs model (``STRETCH_LIMIT``) — the
+signatures of forces too large for the substep or an inverted polygon, without
+which a run goes on to its end time with meaningless numbers.
+"""
+
+import math
+
+import numpy as np
+
+from parmps.errors import CaseError, RunFailure
+from parmps.solids.mass_spring.body import substep_count
+from parmps.solids.mass_spring.build import build_bodies
+from parmps.solids.model import SolidModel
+
+# The area constraint holds |V - V0|/V0 near 1e-6; ten percent means the
+# Lagrange step no longer controls the polygon.
+VOLUME_ERROR_LIMIT = 0.1
+
+# Linear springs stretched twenty times their rest length model nothing real;
+# in practice only an unstable integration or a runaway load gets there.
+STRETCH_LIMIT = 20.0
+
+
+
+class MassSpringModel(SolidModel):
+    """Every mass-spring body of a case.
+
+    ``advance(t, dt_outer)`` runs each body's own substeps with its fluid
+    force held constant (the weak coupling of docs/design.md); bodies are
+    independent, so the coupling gives each to one rank.
+    """
+
+    SERIES = {"volume_error": (), "fluid_force": (2,), "centroid": (2,)}
+
+    def __init__(self, bodies, substep=0.0, safety=0.5, constraint_prediction="linear"):
+        self.bodies = list(bodies)
+        for body in self.bodies:
+            body.quadratic_prediction = constraint_prediction == "quadratic"
+        self.safety = float(safety)
+        self.fixed_substep = float(substep)
+        self.substeps = {body.name: self._substep_of(body) for body in self.bodies}
+        self.last_substep_counts = {body.name: 0 for body in self.bodies}
+    def _substep_of(self, body):
+        limit = body.stability_limit()
+        if self.fixed_substep > 0.0:
+            if self.fixed_substep >= limit:
+                raise CaseError(f"solid.substep ({self.fixed_substep:.6g} s) is above the "
+                                f"stability limit of body '{body.name}' ({limit:.6g} s from its "
+                                f"stiffest node); use at most {self.safety * limit:.3g} s or "
+                                f"0 for automatic")
+            return self.fixed_substep
+        return self.safety * limit
+
+    @classmethod
+    def from_case(cls, case):
+        solid = case.get("solid", {})
+        return cls(build_bodies(case), substep=solid.get("substep", 0.0),
+                   safety=solid.get("safety", 0.5),
+                   constraint_prediction=solid.get("constraint_prediction", "linear"))
+
+    def __len__(self):
+        return len(self.bodies)
+
+    def __iter__(self):
+        return iter(self.bodies)
+
+    def body(self, name):
+        for body in self.bodies:
+            if body.name == name:
+                return body
+        raise KeyError(name)
+
+    def stable_substep(self):
+        """The smallest substep any body uses [s]."""
+        return min(self.substeps.values(), default=math.inf)
+
+    def substep_counts(self, dt_outer):
+        return {name: substep_count(dt_outer, dt) for name, dt in self.substeps.items()}
+
+    def advance(self, time, dt_outer, fluid_force=None):
+        """Advance every body from ``time`` by ``dt_outer``.
+
+        ``fluid_force`` maps a body name to an (n_nodes, 2) force on its nodes,
+        held constant over the substeps; bodies not named feel none.
+        Returns the substep count of every body.
+        """
+        fluid_force = fluid_force or {}
+        for body in self.bodies:
+            force = fluid_force.get(body.name)
+            body.fluid_force[:] = 0.0 if force is None else force
+            self.last_substep_counts[body.name] = body.advance(time, dt_outer,
+                                                               self.substeps[body.name])
+            if not np.all(np.isfinite(body.position)):
+                raise RunFailure(f"body '{body.name}' became non-finite at t = "
+                                 f"{time + dt_outer:.6g} s")
+        return dict(self.last_substep_counts)
+
+    def diagnostics(self):
+        """Per body: volume_error, centroid (2,), fluid_force (2,)."""
+        return {body.name: {"volume_error": body.volume_error(),
+                            "centroid": body.centroid(),
+                            "fluid_force": body.total_fluid_force()}
+                for body in self.bodies}
+
+    def stable_substeps(self):
+        return dict(self.substeps)
+
+    def advance_body(self, k, time, dt):
+        body = self.bodies[k]
+        count = body.advance(time, dt, self.substeps[body.name])
+        self.last_substep_counts[body.name] = count
+        return count
+
+    def particle_counts(self):
+        return [body.n_material for body in self.bodies]
+
+    def outline(self, k):
+        body = self.bodies[k]
+        return body.position[body.outline]
+
+    def kinetic_energy(self):
+        return sum(body.energy()[0] for body in self.bodies)
+
+    def series(self):
+        return self.diagnostics()
+
+    def springs(self, k):
+        return self.bodies[k].springs
+
+    def attributes(self, k):
+        body = self.bodies[k]
+        return {"rest_volume": body.rest_volume, "nodes": body.n_nodes}
+
+    def check(self, step, time):
+        check_bodies(self.bodies, step, time)
+
+    STATE = ("position", "velocity", "fluid_force")
+
+    def state(self):
+        out = {}
+        for body in self.bodies:
+            entry = {name: getattr(body, name).copy() for name in self.STATE}
+            if body.acceleration is not None:
+                entry["acceleration"] = body.acceleration.copy()
+            entry["multiplier"] = np.array(body.multiplier)
+            out[body.name] = entry
+        return out
+
+    def restore(self, state):
+        for body in self.bodies:
+            entry = state[body.name]
+            for name in self.STATE:
+                getattr(body, name)[...] = entry[name]
+            body.acceleration = entry["acceleration"].copy() if "acceleration" in entry \
+                else None
+            body.multiplier = float(entry["multiplier"])
+
+
+def body_state(body):
+    """(finite, |volume error|, largest spring stretch over rest length) of one body."""
+    finite = bool(np.all(np.isfinite(body.position)) and np.all(np.isfinite(body.velocity)))
+    if not finite:
+        return False, np.inf, np.inf
+    error = abs(body.volume_error()) if body.volume_constraint else 0.0
+    springs = body.springs
+    separation = body.position[springs[:, 0]] - body.position[springs[:, 1]]
+    length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
+    stretch = float((length / body.rest_length).max()) if len(springs) else 1.0
+    return True, float(error), stretch
+
+
+def check_bodies(bodies, step, time):
+    """Stop if a body blew up. Bodies are replicated (or broadcast) on every rank,
+    so every rank reaches the same verdict without communication."""
+    for body in bodies:
+        finite, error, stretch = body_state(body)
+        speed = float(np.sqrt((body.velocity ** 2).sum(axis=1)).max()) if finite else np.inf
+        if not finite:
+            cause = "its node positions or velocities became non-finite"
+        elif error > VOLUME_ERROR_LIMIT:
+            cause = (f"its area constraint lost control (volume error {error:.3g} > "
+                     f"{VOLUME_ERROR_LIMIT:g}; fastest node {speed:.4g} m/s)")
+        elif stretch > STRETCH_LIMIT:
+            cause = (f"a spring is stretched to {stretch:.3g} times its rest length "
+                     f"(> {STRETCH_LIMIT:g}; fastest node {speed:.4g} m/s)")
+        else:
+            continue
+        raise RunFailure(f"step {step}: body '{body.name}' blew up at t = {time:.6g} s: {cause}; "
+                         f"the loads or fluid forces are too large for the body, or its "
+                         f"substep too long (solid.substep, solid.safety)")

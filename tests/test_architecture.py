@@ -1,0 +1,222 @@
+"""The structure of the package: no import cycles, registries that load, the dimension,
+scoped PETSc options and the pressure gradient the coupling takes from the fluid."""
+
+import ast
+import importlib
+import pkgutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import parmps
+from conftest import CASES, error_lines, run_parmps
+from parmps import config, schema
+from parmps.core import operators
+from parmps.core.neighbours import pair_list
+from parmps.core.particles import DUMMY, FLUID, SOLID, WALL, Particles
+from parmps.errors import CaseError
+from parmps.fluid.constants import MPSConstants
+from parmps.fluid.schemes import GRADIENTS, SOURCES, registered, scheme_class
+
+PACKAGE = Path(parmps.__file__).parent
+
+
+def _modules():
+    return sorted(m.name for m in pkgutil.walk_packages([str(PACKAGE)], "parmps."))
+
+
+def import_graph():
+    """Module -> the parmps modules it imports, at any depth of its code (lazy ones too)."""
+    names = set(_modules()) | {"parmps"}
+    graph = {}
+    for name in names:
+        path = PACKAGE.joinpath(*name.split(".")[1:])
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        targets = set()
+        package = name if path.name == "__init__.py" else name.rsplit(".", 1)[0]
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                targets |= {alias.name for alias in node.names}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package.split(".")[:len(package.split(".")) - node.level + 1]
+                                    + ([node.module] if node.module else []))
+                for alias in node.names:
+                    full = f"{base}.{alias.name}"
+                    targets.add(full if full in names else base)
+        graph[name] = {t for t in targets if t in names and t != name}
+    return graph
+
+
+def test_no_import_cycle():
+    graph = import_graph()
+    # Tarjan's strongly connected components: a cycle is a component of two or more.
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(node):
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for target in graph[node]:
+            if target not in index:
+                visit(target)
+                low[node] = min(low[node], low[target])
+            elif target in on_stack:
+                low[node] = min(low[node], index[target])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                member = stack.pop()
+                on_stack.discard(member)
+                component.append(member)
+                if member == node:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    assert not cycles, f"import cycles: {cycles}"
+
+
+def test_the_walk_sees_a_cycle():
+    # The walk itself must be able to fail: the machinery of a case imports nothing of
+    # the package's physics, but the schema imports every component's settings.
+    graph = import_graph()
+    assert "parmps.config" in graph["parmps.fluid.settings"]
+    assert "parmps.fluid.settings" in graph["parmps.schema"]
+    assert not any(target.startswith(("parmps.fluid", "parmps.solids", "parmps.run"))
+                   for target in graph["parmps.config"])
+
+
+def test_every_module_imports_without_side_effects():
+    for name in _modules():
+        if not name.endswith("__main__"):
+            importlib.import_module(name)
+
+
+def test_every_registered_scheme_loads_and_declares_its_settings():
+    assert set(SOURCES) >= {"density", "mixed"} and set(GRADIENTS) >= {"minimum", "corrected"}
+    assert not set(SOURCES) & set(GRADIENTS)  # one [mps.<name>] table each
+    for name, scheme in registered():
+        assert isinstance(scheme.KEYS, dict)
+        assert hasattr(scheme, "rhs") or hasattr(scheme, "gradient"), name
+    case = _validated()
+    for name in (*SOURCES, *GRADIENTS):
+        assert isinstance(case["mps"][name], dict)
+
+
+def _validated(extra=""):
+    return schema.validate(config.load_text((CASES / "hydrostatic.toml").read_text() + extra))
+
+
+@pytest.mark.parametrize("old, new", [
+    ("source_term = \"mixed\"", "mps.source"),
+    ("relaxation = 0.3", "[mps.density] relaxation"),
+    ("mixed_relaxation = 0.1", "[mps.mixed] relaxation"),
+    ("gradient_correction = true", "mps.gradient = \"corrected\""),
+    ("gradient_correction_limit = 0.5", "[mps.corrected] eigenvalue_limit"),
+])
+def test_replaced_scheme_keys_name_their_successors(old, new):
+    with pytest.raises(CaseError) as error:
+        _validated(f"\n[mps]\n{old}\n")
+    assert f"mps.{old.split(' ')[0]} is no longer a key" in str(error.value)
+    assert new in str(error.value)
+
+
+def test_scheme_settings_reach_the_scheme():
+    case = _validated("\n[mps]\nsource = \"mixed\"\ngradient = \"corrected\"\n"
+                      "[mps.mixed]\nrelaxation = 0.05\n[mps.corrected]\neigenvalue_limit = 0.5\n")
+    constants = MPSConstants.from_case(case)
+    source = scheme_class(SOURCES, "mixed")(case["mps"]["mixed"], constants)
+    gradient = scheme_class(GRADIENTS, "corrected")(case["mps"]["corrected"], constants)
+    assert source.relaxation == 0.05 and gradient.eigenvalue_limit == 0.5
+    with pytest.raises(CaseError, match="mps.mixed.relaxtion"):
+        _validated("\n[mps.mixed]\nrelaxtion = 0.05\n")
+
+
+def test_a_3d_case_is_refused_with_a_clear_message(tmp_path):
+    text = (CASES / "hydrostatic.toml").read_text().replace(
+        "[domain]\nlower = [-0.06, -0.06]", "[domain]\nlower = [-0.06, -0.06, 0.0]")
+    assert "lower = [-0.06, -0.06, 0.0]" in text
+    path = tmp_path / "three_d.toml"
+    path.write_text(text)
+    result = run_parmps([path, "--check"], timeout=60)
+    assert result.returncode == 2
+    (line,) = error_lines(result.stderr)
+    assert "3D" in line and "domain.lower" in line and "Traceback" not in result.stderr
+
+
+def test_a_mistyped_pressure_option_is_reported(tmp_path):
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.005",
+                         "-pressure_ksp_typoo", "3", "-pressure_ksp_rtol", "1e-9"], timeout=120)
+    assert result.returncode == 0, result.stderr
+    warnings = [line for line in result.stderr.splitlines() if "WARNING" in line]
+    assert len(warnings) == 1 and "-pressure_ksp_typoo" in warnings[0], warnings
+    assert "-pressure_ksp_rtol" not in warnings[0]  # used: not reported
+
+
+def test_pressure_options_leave_no_trace_in_petsc():
+    from parmps.fluid.ppe import PressureSolver, _petsc
+    PETSc = _petsc()
+    settings = _validated()["pressure"]
+    solver = PressureSolver(__import__("mpi4py.MPI", fromlist=["MPI"]).COMM_WORLD, settings,
+                            {"ksp_rtol": "1e-9"})
+    try:
+        assert not any(name.startswith("pressure_") for name in PETSc.Options().getAll())
+        assert solver.ksp.getTolerances()[0] == 1e-9
+    finally:
+        solver.destroy()
+
+
+@pytest.mark.parametrize("option, value", [("ksp_type", "nonsense"), ("pc_type", "nonsense")])
+def test_an_unknown_solver_type_is_bad_input(tmp_path, option, value):
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.005",
+                         f"-pressure_{option}", value], timeout=120)
+    assert result.returncode == 2
+    (line,) = error_lines(result.stderr)
+    assert f"-pressure_{option}" in line and value in line
+    assert "PETSC ERROR" not in result.stderr and "Traceback" not in result.stderr
+
+
+def _jittered_scene(spacing, seed=3):
+    """A lattice of fluid with a solid node in the middle, jittered, and a linear pressure."""
+    rng = np.random.default_rng(seed)
+    grid = np.arange(-6, 7) * spacing
+    x, y = np.meshgrid(grid, grid)
+    position = np.column_stack([x.ravel(), y.ravel()])
+    position += rng.uniform(-0.15, 0.15, position.shape) * spacing
+    centre = int(np.argmin(np.hypot(*position.T)))
+    kind = np.full(len(position), FLUID, np.int8)
+    kind[centre] = SOLID
+    return position, kind, centre
+
+
+def test_the_coupling_feels_the_fluids_corrected_gradient():
+    """With mps.gradient = "corrected", a body node feels -V times the gradient the fluid
+    moves by, on a disordered arrangement where the corrected and the plain MPS gradients
+    differ. (Before the schemes were shared, the coupling took the plain gradient.)"""
+    from parmps.coupling.weak import fluid_forces
+    case = _validated("\n[mps]\ngradient = \"corrected\"\n")
+    case["fluid"]["viscosity"] = 0.0
+    constants = MPSConstants.from_case(case)
+    corrected = scheme_class(GRADIENTS, "corrected")(case["mps"]["corrected"], constants)
+    plain = scheme_class(GRADIENTS, "minimum")({}, constants)
+    position, kind, centre = _jittered_scene(constants.spacing)
+    pressure = 5000.0 + position @ np.array([300.0, -900.0]) + 4e5 * position[:, 0] ** 2
+    particles = Particles({"id": np.arange(len(position)), "kind": kind,
+                           "position": position, "pressure": pressure})
+    force = fluid_forces(particles, np.array([centre]), constants, corrected)[0]
+    indptr, cols = pair_list(position, constants.re_laplacian)
+    has_pressure = kind != DUMMY
+    volume = constants.spacing ** 2
+    by_fluid = -volume * corrected.gradient(indptr, cols, position, pressure, has_pressure,
+                                            len(position))[centre]
+    by_plain = -volume * plain.gradient(indptr, cols, position, pressure, has_pressure,
+                                        len(position))[centre]
+    np.testing.assert_allclose(force, by_fluid, rtol=1e-12)
+    # The two gradients differ here by far more than rounding: the test tells them apart.
+    assert np.abs(by_plain - by_fluid).max() > 1e-2 * np.abs(by_fluid).max()
