@@ -207,7 +207,8 @@ def test_hl_second_moment_on_a_jittered_lattice(radius_factor, seed):
 def test_projection_normalisation_makes_hs_and_hl_consistent():
     # With c = 2/n0, n0 <lap p>_i = -Dn_i/Dt(grad p) for a quadratic p on a lattice:
     # a pressure solved with the HS source takes out exactly the rate it was given.
-    # The paper's 3/n0 takes out 1.5 times it (2D); in 3D both are 2/n0.
+    # The paper's 3/n0 is 1.5 times that operator (2D), so its pressure takes out
+    # 2/3 of the rate; in 3D both are 2/n0.
     position = lattice()
     radius = 2.1 * SPACING
     n0 = khayyer_gotoh.lattice_sums(SPACING, radius)[0]
@@ -223,6 +224,31 @@ def test_projection_normalisation_makes_hs_and_hl_consistent():
     np.testing.assert_allclose(n0 * projection * hl[inside], -rate[inside], rtol=1e-10)
     paper = khayyer_gotoh.higher_order_laplacian_coefficient(SPACING, radius, "paper")
     np.testing.assert_allclose(n0 * paper * hl[inside], -1.5 * rate[inside], rtol=1e-10)
+
+
+def test_hs_with_the_standard_laplacian_overcorrects_by_the_lattice_factor():
+    # The standard Laplacian (2d/(lambda0 n0), exact for quadratics on the lattice)
+    # paired with the HS source: the pressure takes out (n0 + N)/(d n0) times the
+    # rate it was given, 1.67 at the default re = 2.3 l0 (docs/schemes.md, HS).
+    position = lattice()
+    radius = 2.3 * SPACING
+    laplacian_radius = 3.1 * SPACING
+    n0, count, _, _ = khayyer_gotoh.lattice_sums(SPACING, radius)
+    pressure = 0.5 * ((position - 0.12) ** 2).sum(axis=1)
+    indptr, cols = pair_list(position, laplacian_radius)
+    n = len(position)
+    gradient = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
+                                                        np.ones(n, bool), radius, n)
+    rate = khayyer_gotoh.number_density_rate(indptr, cols, position, gradient, radius, n)
+    pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
+    n0_laplacian, lambda0 = operators.reference_values(SPACING, laplacian_radius)
+    standard = operators.laplacian(pairs, pairs.weight(laplacian_radius), pressure, n,
+                                   n0_laplacian, lambda0)
+    inside = interior(position, 6 * SPACING)
+    np.testing.assert_allclose(standard[inside], 2.0, rtol=1e-10)
+    np.testing.assert_allclose(-rate[inside] / (n0 * standard[inside]),
+                               (n0 + count) / (2 * n0), rtol=1e-10)
+    assert (n0 + count) / (2 * n0) == pytest.approx(1.6718, abs=1e-4)
 
 
 def test_unknown_normalisation_is_refused():
