@@ -1,0 +1,236 @@
+"""Khayyer & Gotoh's stabilised pressure schemes: HS, HL, ECS (docs/schemes.md).
+
+Pair loops in the style of :mod:`parmps.core.kernels` (rows are the owned
+particles, columns owned or ghost, distances evaluated on the fly), written for
+any dimension d = ``position.shape[1]``, plus thin numpy functions that turn
+their sums into pressure-equation terms.
+
+Sign convention: parmps solves ``A p = b`` with ``A = -<lap> + shift`` (symmetric
+positive definite), so every ``*_source`` here returns ``b``, the right-hand side
+of ``-<lap p>_i = b_i``: positive where the fluid is being compressed.
+
+Sources
+- HS: Khayyer & Gotoh (2009), "Modified moving particle semi-implicit methods
+  for the prediction of 2D wave impact pressure", Coastal Engineering 56,
+  419-440: the source is the time derivative of the number density taken
+  analytically along the particles' (predicted) velocities.
+- HL: Khayyer & Gotoh (2010), "A higher order Laplacian model for enhancement
+  and stabilization of pressure calculation by the MPS method", Applied Ocean
+  Research 32, 124-131: in 2D <lap phi>_i = 1/n0 sum_j phi_ij
+  (w''(r_ij) - w'(r_ij)/r_ij), which for w = re/r - 1 is 3 re/(n0 r_ij^3).
+- ECS: Khayyer & Gotoh (2011), "Enhancement of stability and accuracy of the
+  moving particle semi-implicit method", J. Comput. Phys. 230, 3093-3118.
+The equation numbers of these papers could not be checked here; OpenMps
+(src/OpenMps/Computer.hpp, MPS_HS/MPS_HL/MPS_ECS) implements the same
+formulas and was read alongside.
+"""
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True, inline="always")
+def _separation(position, i, j, offset):
+    """Fill ``offset`` with r_j - r_i and return |r_j - r_i|^2."""
+    r2 = 0.0
+    for k in range(position.shape[1]):
+        offset[k] = position[j, k] - position[i, k]
+        r2 += offset[k] * offset[k]
+    return r2
+
+
+@numba.njit(cache=True)
+def number_density_rate(indptr, cols, position, velocity, radius, n_rows):
+    """Dn_i/Dt = sum_j dw(r_ij)/dr dr_ij/dt = -re sum_j (r_ij . u_ij) / |r_ij|^3.
+
+    The exact time derivative of n_i = sum_j w(r_ij) with w = re/r - 1, at the
+    given positions and velocities (r_ij = r_j - r_i, u_ij = u_j - u_i), over
+    every neighbour within ``radius`` = re, dummies included: they count in the
+    number density (Khayyer & Gotoh 2009, the HS source).
+    """
+    dimension = position.shape[1]
+    out = np.zeros(n_rows)
+    offset = np.empty(dimension)
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            r2 = _separation(position, i, j, offset)
+            if r2 <= 0.0 or r2 >= radius * radius:
+                continue
+            approach = 0.0
+            for k in range(dimension):
+                approach += offset[k] * (velocity[j, k] - velocity[i, k])
+            total += approach / (r2 * np.sqrt(r2))
+        out[i] = -radius * total
+    return out
+
+
+@numba.njit(cache=True)
+def higher_order_laplacian_sum(indptr, cols, position, field, include, radius, n_rows):
+    """sum_j (phi_j - phi_i) re / |r_ij|^3 over neighbours j within ``radius`` with include[j].
+
+    Times the HL coefficient (``higher_order_laplacian_coefficient``) this is
+    Khayyer & Gotoh's (2010) higher-order Laplacian of a scalar field; with
+    ``include`` = "carries a pressure" it is minus the action of the matrix that
+    ``higher_order_laplacian_rows`` builds, for rows whose neighbours are all unknowns.
+    """
+    dimension = position.shape[1]
+    out = np.zeros(n_rows)
+    offset = np.empty(dimension)
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not include[j]:
+                continue
+            r2 = _separation(position, i, j, offset)
+            if r2 <= 0.0 or r2 >= radius * radius:
+                continue
+            total += (field[j] - field[i]) * radius / (r2 * np.sqrt(r2))
+        out[i] = total
+    return out
+
+
+@numba.njit(cache=True)
+def higher_order_laplacian_rows(indptr, cols, position, radius, row_number, is_unknown,
+                                coefficient, diagonal_shift, dirichlet_diagonal):
+    """CSR rows of the pressure matrix with the HL weight re/|r_ij|^3 in place of w_ij.
+
+    Same contract as :func:`parmps.core.kernels.poisson_rows`: one row per owned
+    particle with ``row_number >= 0`` (dummies carry no pressure and get none;
+    as columns they are skipped too); ``is_unknown`` false makes a decoupled
+    Dirichlet row ``dirichlet_diagonal * P_i = 0``. An unknown row i has the
+    diagonal ``coefficient * sum_j K_ij + diagonal_shift`` over neighbours j within
+    ``radius`` that carry a pressure, and ``-coefficient * K_ij`` for those that are
+    unknowns (a Dirichlet neighbour has P_j = 0 and adds to the diagonal only),
+    with K_ij = re/|r_ij|^3. Diagonal first in each row. Symmetric, because K is.
+    """
+    n_owned = indptr.shape[0] - 1
+    dimension = position.shape[1]
+    offset = np.empty(dimension)
+    radius2 = radius * radius
+    n_rows = 0
+    for i in range(n_owned):
+        if row_number[i] >= 0:
+            n_rows += 1
+    row_ptr = np.zeros(n_rows + 1, np.int64)
+    k = 0
+    for i in range(n_owned):
+        if row_number[i] < 0:
+            continue
+        length = 1
+        if is_unknown[i]:
+            for p in range(indptr[i], indptr[i + 1]):
+                j = cols[p]
+                if row_number[j] < 0 or not is_unknown[j]:
+                    continue
+                r2 = _separation(position, i, j, offset)
+                if 0.0 < r2 < radius2:
+                    length += 1
+        row_ptr[k + 1] = row_ptr[k] + length
+        k += 1
+    columns = np.empty(row_ptr[n_rows], np.int64)
+    values = np.empty(row_ptr[n_rows])
+    k = 0
+    for i in range(n_owned):
+        if row_number[i] < 0:
+            continue
+        columns[row_ptr[k]] = row_number[i]
+        if not is_unknown[i]:
+            values[row_ptr[k]] = dirichlet_diagonal
+            k += 1
+            continue
+        place = row_ptr[k] + 1
+        diagonal = diagonal_shift
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if row_number[j] < 0:
+                continue
+            r2 = _separation(position, i, j, offset)
+            if r2 <= 0.0 or r2 >= radius2:
+                continue
+            weight = coefficient * radius / (r2 * np.sqrt(r2))
+            diagonal += weight
+            if is_unknown[j]:
+                columns[place] = row_number[j]
+                values[place] = -weight
+                place += 1
+        values[row_ptr[k]] = diagonal
+        k += 1
+    return row_ptr, columns, values
+
+
+def lattice_sums(spacing, radius, dimension=2):
+    """Sums over a particle's neighbours on the full square/cubic lattice of spacing l0.
+
+    Returns ``(n0, count, inverse_distance_sum, inverse_cube_sum)``: n0 = sum w,
+    count = neighbours within ``radius``, sum re/r (= n0 + count) and sum re/r^3
+    (the HL weight; times the coefficient, the diagonal of an interior row).
+    """
+    reach = int(np.ceil(radius / spacing)) + 1
+    axes = [np.arange(-reach, reach + 1) * spacing] * dimension
+    offsets = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dimension)
+    distance = np.sqrt((offsets ** 2).sum(axis=1))
+    distance = distance[(distance > 0.0) & (distance < radius)]
+    n0 = float((radius / distance - 1.0).sum())
+    return (n0, len(distance), float((radius / distance).sum()),
+            float((radius / distance ** 3).sum()))
+
+
+HL_NORMALISATIONS = ("paper", "projection", "lattice")
+
+
+def higher_order_laplacian_coefficient(spacing, radius, normalisation="paper", dimension=2):
+    """The factor c in <lap phi>_i = c sum_j phi_ij re/|r_ij|^3 (docs/schemes.md, HL).
+
+    - "paper": (5 - d)/n0, Khayyer & Gotoh (2010) in 2D (3/n0) and OpenMps in 2D
+      and 3D. On a lattice it is c_q times the true Laplacian of a quadratic
+      field, c_q = (5 - d)(n0 + N)/(2 d n0): 2.13 at re = 2.1 l0, 1.86 at 3.1 l0
+      (OpenMps issue #30 reports the same 2.126), 1.5 in the continuum limit.
+    - "projection": 2/n0. With the HS source and the standard MPS gradient this
+      makes the projection consistent on a lattice: the corrected velocities of a
+      quadratic pressure field have zero HS rate. Equal to "paper" in 3D only.
+    - "lattice": 2d / sum_j re/|r_ij| over the initial lattice, so that the
+      operator is exact for quadratic fields on it (the role lambda0 plays in the
+      standard Laplacian).
+    ``n0`` is the lattice number density at ``radius``.
+    """
+    n0, _, inverse_distance_sum, _ = lattice_sums(spacing, radius, dimension)
+    if normalisation == "paper":
+        return (5.0 - dimension) / n0
+    if normalisation == "projection":
+        return 2.0 / n0
+    if normalisation == "lattice":
+        return 2.0 * dimension / inverse_distance_sum
+    raise ValueError(f"unknown HL normalisation {normalisation!r}; "
+                     f"expected one of {', '.join(HL_NORMALISATIONS)}")
+
+
+def higher_order_source(rate, density, n0, dt):
+    """HS right-hand side b_i = rho/(n0 dt) Dn_i/Dt, from ``number_density_rate`` at (r*, u*).
+
+    Khayyer & Gotoh (2009): <lap p>_i = -rho/(n0 dt) (Dn/Dt)*_i, i.e. the
+    standard source rho/dt^2 (n* - n0)/n0 with the difference quotient replaced
+    by the analytic derivative along the predicted velocities.
+    """
+    return (density / (n0 * dt)) * np.asarray(rate)
+
+
+def error_compensating_source(number_density, rate, density, n0, dt):
+    """ECS right-hand side, to be added to the HS one (Khayyer & Gotoh 2011).
+
+    With e_i = (n_i^k - n0)/n0 and the rate (Dn/Dt)_i^k, both at the start of
+    the step (positions r^k, velocities u^k):
+
+        b_i = |e_i| rho/(n0 dt) (Dn/Dt)_i^k + |dt/n0 (Dn/Dt)_i^k| rho/dt^2 e_i
+            = rho/(n0 dt) (|e_i| (Dn/Dt)_i^k + |(Dn/Dt)_i^k| e_i),
+
+    the paper's dynamic coefficients alpha = |e| and beta = |dt/n0 Dn/Dt|. It
+    is 2 rho/(n0 dt) |e_i| (Dn/Dt)_i^k where the deviation is growing (same
+    signs: more pressure while compressing further, less while expanding
+    further) and zero where it is already shrinking, at n = n0 or at a standstill.
+    """
+    deviation = (np.asarray(number_density) - n0) / n0
+    rate = np.asarray(rate)
+    return (density / (n0 * dt)) * (np.abs(deviation) * rate + np.abs(rate) * deviation)
