@@ -22,12 +22,16 @@ CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 
 
 def spacing_for(target):
-    """The l0 = a/m (a = 0.2 m) whose dam-break scene holds closest to ``target`` particles."""
+    """The l0 = a/m (a the case's column width) whose dam-break scene holds closest to
+    ``target`` particles."""
     from parmps.core import scene
+    from parmps.tools import analysis
+    lower, upper = analysis.fluid_extent(_case(None))
+    width, height = upper - lower
     best = None
     for m in range(10, 400):
-        spacing = 0.2 / m
-        fluid = 2 * m * m
+        spacing = width / m
+        fluid = m * round(height / spacing)
         if fluid > 2 * target:
             break
         if fluid < target / 4:
@@ -43,11 +47,15 @@ def _case(spacing, steps=0):
     from parmps import config, schema
     with open(CASE, "rb") as handle:
         raw = config.load_text(handle.read().decode())
-    raw["particles"]["spacing"] = spacing
-    # A tank as tall as the column's run-up needs for 25 steps keeps the count
-    # mostly fluid (the case's taller walls are for the splash at t > 0.4 s).
-    raw["tank"][0]["upper"][1] = 0.8
-    raw["domain"]["upper"][1] = 0.9
+    if spacing is not None:
+        raw["particles"]["spacing"] = spacing
+    # A tank twice as tall as the column, as the run-up needs for 25 steps, keeps the
+    # count mostly fluid (the case's taller walls are for the splash at t > 0.4 s).
+    tank, domain = raw["tank"][0], raw["domain"]
+    headroom = domain["upper"][1] - tank["upper"][1]
+    column = raw["fluid_block"][0]
+    tank["upper"][1] = tank["lower"][1] + 2 * (column["upper"][1] - column["lower"][1])
+    domain["upper"][1] = tank["upper"][1] + headroom
     raw["time"]["max_steps"] = steps
     raw.setdefault("output", {})["frames"] = False
     return schema.validate(raw)

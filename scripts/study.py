@@ -11,6 +11,10 @@ tables, and ``DOCS/validation.json`` with every number in them. ``--quick``
 runs a few coarse points of each sweep (for the test suite, under a minute);
 its report goes to ``out/study-quick/`` unless --docs says otherwise.
 
+The cases, metrics and tolerances are those of ``validation/<name>/``; every
+physical size comes from the case files, and resolutions are fractions of them
+(l0 = a/m for the dam break's column a, H/m for the still tank's depth H).
+
 Wall times are the run's own loop time (``/diagnostics/wall_seconds`` at the
 last step: no interpreter start-up, no numba loading), on a shared 2-core
 machine: they are noisy, and the report says so next to every figure.
@@ -31,19 +35,17 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-CASES = os.path.join(ROOT, "cases")
-COLUMN = 0.2            # dam break column width a [m]
-DEPTH = 0.2             # hydrostatic water depth H [m]
-RHO, G = 1000.0, 9.81
-T_DAM = 0.343           # T = 3.4 for a = 0.2 m
-SETTLE = 0.3            # hydrostatic: frames after this time are averaged
 
+from parmps import validation  # noqa: E402
+from parmps.tools import analysis  # noqa: E402
+from parmps.tools.analysis import log_slope as slope  # noqa: E402
 
-def dam_break_tank_length():
-    """The dam-break tank's inner length [m], read from cases/dam_break.toml."""
-    import tomllib
-    with open(os.path.join(CASES, "dam_break.toml"), "rb") as handle:
-        return tomllib.load(handle)["tank"][0]["upper"][0]
+# The pressure schemes compared, as case overrides: the one place that names their keys.
+PRESSURE_SCHEMES = {
+    "density": [],
+    "mixed": ['mps.source="mixed"'],
+    "mixed, no clamp": ['mps.source="mixed"', "mps.clamp_negative_pressure=false"],
+}
 
 
 # --------------------------------------------------------------------------
@@ -52,7 +54,7 @@ def dam_break_tank_length():
 def parmps_command(case, out, sets=(), end_time=None, petsc=(), ranks=1):
     argv = [sys.executable, "-m", "parmps", case, "-o", out]
     if end_time is not None:
-        argv += ["--end-time", repr(end_time)]
+        argv += ["--end-time", f"{end_time:.6g}"]
     for item in sets:
         argv += ["--set", item]
     argv += list(petsc)
@@ -121,49 +123,37 @@ def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600):
     else:
         record["outcome"] = f"exit {status} without a message: " + " | ".join(
             stderr.strip().splitlines()[-2:])
-    record.update(read_run(result))
+    record.update(analysis.run_summary(result) if os.path.exists(result) else {})
     if status == 0 and not record.get("finite", False):
         record["outcome"] = "ran to the end with NON-FINITE values (no message)"
     return record
 
 
-def read_run(path):
-    """Loop wall time, steps, last time and finiteness of a result file."""
-    import h5py
-    if not os.path.exists(path):
-        return {}
-    try:
-        with h5py.File(path, "r") as handle:
-            diagnostics = handle["diagnostics"]
-            wall = diagnostics["wall_seconds"][()]
-            frames = sorted(handle["frames"]) if "frames" in handle else []
-            finite = True
-            if frames:
-                last = handle["frames"][frames[-1]]
-                finite = bool(np.all(np.isfinite(last["position"][()])) and
-                              np.all(np.isfinite(last["velocity"][()])))
-            return {"wall": float(wall[-1]) if len(wall) else 0.0,
-                    "steps": int(len(wall)),
-                    "end": float(diagnostics["time"][-1]) if len(wall) else 0.0,
-                    "finite": finite,
-                    "ksp_mean": float(np.mean(diagnostics["ksp_iterations"][()]))
-                    if len(wall) else 0.0}
-    except (OSError, KeyError):
-        return {}
-
-
-def slope(x, y):
-    """Least-squares slope of log y against log x (the observed order)."""
-    x, y = np.asarray(x, float), np.asarray(y, float)
-    keep = (x > 0) & (y > 0) & np.isfinite(x) & np.isfinite(y)
-    if keep.sum() < 2:
-        return math.nan
-    return float(np.polyfit(np.log(x[keep]), np.log(y[keep]), 1)[0])
-
-
 def median_wall(records):
     walls = [r["wall"] for r in records if "wall" in r]
     return float(np.median(walls)) if walls else math.nan
+
+
+def margin_sets(case, spacing, margin):
+    """Domain overrides: the case's tank plus ``margin`` on every side but the top (the case's)."""
+    tank = case["tank"][0]
+    return [f"domain.lower=[{tank['lower'][0] - margin:.10g}, {tank['lower'][1] - margin:.10g}]",
+            f"domain.upper=[{tank['upper'][0] + margin:.10g}, "
+            f"{case['domain']['upper'][1]:.10g}]"]
+
+
+def wall_margin(case, spacing):
+    """The case's own margin around its tank, or 5 l0 where coarse walls reach further."""
+    return max(case["tank"][0]["lower"][0] - case["domain"]["lower"][0], 5 * spacing)
+
+
+def hydrostatic_record(result, settle_time):
+    """The still tank's metric, under the report's names."""
+    measured = analysis.hydrostatic_pressure_error(result, analysis.result_case(result),
+                                                   settle_time)
+    return {"mean_error": measured["rms"], "bottom_mean": measured["bottom"],
+            **{key: measured[key] for key in ("bottom_std", "noise", "speed_rms",
+                                              "bottom_series", "bottom_times")}}
 
 
 # --------------------------------------------------------------------------
@@ -178,6 +168,10 @@ class Study:
         self.figures = {}
         self.table_rows = []
         self.cache = {}
+        self.dam = validation.load("dam_break")
+        self.hydro = validation.load("hydrostatic")
+        self.solid_check = validation.load("mass_spring_7x7")
+        self.box_check = validation.load("box_in_flow")
 
     def out(self, *parts):
         return os.path.join(self.work, *parts)
@@ -199,28 +193,22 @@ class Study:
 
     # -- dam break -----------------------------------------------------------
     def dam_break_point(self, m, ranks, scheme_sets=(), label="default", repeats=1):
-        from parmps.tools import analysis
-        spacing = COLUMN / m
+        case = self.dam.case()
+        lower, upper = analysis.fluid_extent(case)
+        spacing = (upper[0] - lower[0]) / m
         out = self.out("dam_break", f"{label}_m{m}_r{ranks}")
-        # Coarse walls (4 layers) reach further out than the case's domain allows.
-        margin = max(0.05, 5 * spacing)
-        sets = [f"particles.spacing={spacing:.10g}", "time.output_interval=0.005",
-                f"domain.lower=[{-margin:.10g}, {-margin:.10g}]",
-                f"domain.upper=[{dam_break_tank_length() + margin:.10g}, 1.3]"]
-        sets += list(scheme_sets)
-        record = self.repeat(os.path.join(CASES, "dam_break.toml"), out, sets, T_DAM,
+        sets = [f"particles.spacing={spacing:.10g}",
+                f"time.output_interval={self.dam.run['output_interval']:.10g}"]
+        sets += margin_sets(case, spacing, wall_margin(case, spacing)) + list(scheme_sets)
+        end = self.dam.run["until"] / analysis.dam_break_time_scale(case)
+        record = self.repeat(self.dam.case_path, out, sets, end,
                              ranks=ranks, repeats=repeats, timeout=900)
         record.update(m=m, spacing=spacing, label=label)
         if record["status"] == 0:
-            rms, t_sim, z_sim, t_exp, z_exp = analysis.dam_break_error(
-                record["result"], column_width=COLUMN, wall_x=0.0, spacing=spacing)
-            keep = t_exp <= 3.0
-            delays = np.linspace(0.0, 0.6, 121)
-            shifted = [np.sqrt(np.mean(((np.interp(t_exp[keep] - d, t_sim, z_sim) - z_exp[keep])
-                                        / z_exp[keep]) ** 2)) for d in delays]
-            record.update(rms=rms, rms_shifted=float(min(shifted)),
-                          delay=float(delays[int(np.argmin(shifted))]),
-                          curve=(t_sim.tolist(), z_sim.tolist()))
+            measured = self.dam.measure(record["result"])
+            record.update(rms=measured["rms"], rms_shifted=measured["rms_delayed"],
+                          delay=measured["delay"],
+                          curve=(measured["T"].tolist(), measured["Z"].tolist()))
         self.log(f"dam break {label} a/{m} on {ranks}: {record['outcome']}, "
                  f"rms {record.get('rms', math.nan):.4f}, wall {record.get('wall', math.nan):.2f} s")
         return record
@@ -239,17 +227,18 @@ class Study:
 
     # -- hydrostatic ---------------------------------------------------------
     def hydrostatic_point(self, m, ranks, scheme_sets=(), label="default", end=1.0, repeats=1):
-        spacing = DEPTH / m
+        case = self.hydro.case()
+        lower, upper = analysis.fluid_extent(case)
+        spacing = (upper[1] - lower[1]) / m
         out = self.out("hydrostatic", f"{label}_m{m}_r{ranks}_t{end:g}")
-        margin = max(0.06, 5 * spacing)
-        sets = [f"particles.spacing={spacing:.10g}", "time.output_interval=0.01",
-                f"domain.lower=[{-margin:.10g}, {-margin:.10g}]",
-                f"domain.upper=[{0.2 + margin:.10g}, 0.36]"] + list(scheme_sets)
-        record = self.repeat(os.path.join(CASES, "hydrostatic.toml"), out, sets, end,
+        sets = [f"particles.spacing={spacing:.10g}", "time.output_interval=0.01"]
+        sets += margin_sets(case, spacing, wall_margin(case, spacing)) + list(scheme_sets)
+        record = self.repeat(self.hydro.case_path, out, sets, end,
                              ranks=ranks, repeats=repeats, timeout=900)
         record.update(m=m, spacing=spacing, label=label, t_end=end)
         if record["status"] == 0:
-            record.update(hydrostatic_metrics(record["result"], spacing, min(SETTLE, end / 2)))
+            record.update(hydrostatic_record(record["result"],
+                                             min(self.hydro.study["settle_time"], end / 2)))
         self.log(f"hydrostatic {label} H/{m} on {ranks} to {end} s: {record['outcome']}, "
                  f"mean err {record.get('mean_error', math.nan):.4f}, "
                  f"bottom std {record.get('bottom_std', math.nan):.4f}, "
@@ -268,18 +257,12 @@ class Study:
         self.results["hydrostatic"] = records
 
     # -- pressure schemes ----------------------------------------------------
-    SCHEMES = {
-        "density": [],
-        "mixed": ["mps.source_term=\"mixed\""],
-        "mixed, no clamp": ["mps.source_term=\"mixed\"", "mps.clamp_negative_pressure=false"],
-    }
-
     def schemes(self):
         hydro_m, hydro_end = (10, 0.3) if self.quick else (20, 2.0)
         dam_levels = (8,) if self.quick else (20, 40)
         repeats = 1 if self.quick else 3
         records = []
-        for label, sets in self.SCHEMES.items():
+        for label, sets in PRESSURE_SCHEMES.items():
             if self.quick and label == "mixed, no clamp":
                 continue
             hydro = self.hydrostatic_point(hydro_m, 1, sets, label=label, end=hydro_end,
@@ -296,33 +279,34 @@ class Study:
 
     # -- 7x7 mass-spring -----------------------------------------------------
     def solid(self):
-        case = os.path.join(CASES, "mass_spring_7x7.toml")
-        end = 0.6 if self.quick else 1.5
+        check = self.solid_check
+        case_path = check.case_path
+        end = 0.6 if self.quick else check.case()["time"]["end"]
         substeps = ([1e-3, 2.5e-4] if self.quick else
                     [1e-3, 5e-4, 2.5e-4, 1.25e-4, 6.25e-5, 3.125e-5])
         reference = 3.125e-5 / 4 if not self.quick else 6.25e-5
         records = []
-        ref = run(case, self.out("solid", "reference"), [f"solid.substep={reference:.10g}"], end)
-        ref_tip = solid_tip(ref["result"])
+        ref = run(case_path, self.out("solid", "reference"),
+                  [f"solid.substep={reference:.10g}"], end)
+        ref_tip = analysis.tip_trajectory(ref["result"], analysis.result_case(ref["result"]))
         for substep in substeps:
             for constraint in ((True,) if self.quick else (True, False)):
                 name = f"h{substep:g}_{'constrained' if constraint else 'free'}"
                 sets = [f"solid.substep={substep:.10g}",
                         f"body.0.volume_constraint={'true' if constraint else 'false'}"]
                 if constraint:
-                    record = self.repeat(case, self.out("solid", name), sets, end,
+                    record = self.repeat(case_path, self.out("solid", name), sets, end,
                                          repeats=1 if self.quick else 3)
                     reference_tip = ref_tip
                 else:
-                    record = run(case, self.out("solid", name), sets, end)
+                    record = run(case_path, self.out("solid", name), sets, end)
                     reference_tip = None
                 record.update(substep=substep, constraint=constraint)
                 if record["status"] == 0:
-                    import h5py
-                    with h5py.File(record["result"], "r") as handle:
-                        error = handle["solids/block/volume_error"][()]
-                    record["volume_error"] = float(np.abs(error).max())
-                    tip = solid_tip(record["result"])
+                    case = analysis.result_case(record["result"])
+                    record["volume_error"] = analysis.volume_error(record["result"],
+                                                                   case)["volume_error"]
+                    tip = analysis.tip_trajectory(record["result"], case)
                     record["tip"] = tip[1].tolist()
                     record["tip_time"] = tip[0].tolist()
                     if reference_tip is not None:
@@ -337,15 +321,15 @@ class Study:
 
     # -- stiffness -----------------------------------------------------------
     def stiffness(self):
-        case = os.path.join(CASES, "mass_spring_7x7.toml")
+        case_path = self.solid_check.case_path
         exponents = (1, 4, 7) if self.quick else range(1, 10)
         end = 0.02 if self.quick else 0.05
         records = []
         for e in exponents:
             k = 10.0 ** e
             sets = [f"body.0.stiffness={k:.10g}", f"body.0.shear_stiffness={k:.10g}"]
-            record = run(case, self.out("stiffness", f"k1e{e}"), sets, end, timeout=600)
-            record.update(k=k, substeps=substeps_per_step(k))
+            record = run(case_path, self.out("stiffness", f"k1e{e}"), sets, end, timeout=600)
+            record.update(k=k, substeps=substeps_per_step(self.solid_check.case(sets)))
             self.log(f"stiffness {k:g}: {record['outcome']}, {record['substeps']} substeps, "
                      f"wall {record.get('wall', math.nan):.2f} s")
             records.append(record)
@@ -355,76 +339,84 @@ class Study:
 
     # -- stability map -------------------------------------------------------
     def stability(self):
-        dam = os.path.join(CASES, "dam_break.toml")
-        hydro = os.path.join(CASES, "hydrostatic.toml")
+        dam_case, hydro_case = self.dam.case(), self.hydro.case()
+        dam_lower, dam_upper = analysis.fluid_extent(dam_case)
+        column = dam_upper[0] - dam_lower[0]
+        dam_end = self.dam.run["until"] / analysis.dam_break_time_scale(dam_case)
         m = 10 if self.quick else 20
-        coarse = [f"particles.spacing={COLUMN / m:.10g}", "time.output_interval=0.02",
-                  "domain.lower=[-0.1, -0.1]",
-                  f"domain.upper=[{dam_break_tank_length() + 0.1:g}, 1.3]"]
+        # Twice the case's margin around the tank: spray at coarse l0 reaches further.
+        coarse = [f"particles.spacing={column / m:.10g}", "time.output_interval=0.02"]
+        coarse += margin_sets(dam_case, column / m, 2 * wall_margin(dam_case, 0.0))
         rows = []
         for dt in ((0.004,) if self.quick else (0.0005, 0.002, 0.004, 0.01)):
             rows.append(("dam break a/%d, fixed dt" % m, f"time.fixed_dt = {dt:g} s",
-                         run(dam, self.out("stability", f"fixed_dt{dt:g}"),
-                             coarse + [f"time.fixed_dt={dt:.10g}"], T_DAM, timeout=300)))
+                         run(self.dam.case_path, self.out("stability", f"fixed_dt{dt:g}"),
+                             coarse + [f"time.fixed_dt={dt:.10g}"], dam_end, timeout=300)))
         for nu in (() if self.quick else (0.0, 1e-9)):
             rows.append(("dam break a/%d, inviscid" % m, f"fluid.viscosity = {nu:g} m²/s",
-                         run(dam, self.out("stability", f"nu{nu:g}"),
-                             coarse + [f"fluid.viscosity={nu:.10g}"], T_DAM, timeout=300)))
+                         run(self.dam.case_path, self.out("stability", f"nu{nu:g}"),
+                             coarse + [f"fluid.viscosity={nu:.10g}"], dam_end, timeout=300)))
         if not self.quick:
-            # The hydrostatic tank with a column ten times higher (2 m of water).
-            tall = ["particles.spacing=0.02", "fluid_block.0.upper=[0.2, 2.0]",
-                    "tank.0.upper=[0.2, 2.2]", "domain.lower=[-0.1, -0.1]",
-                    "domain.upper=[0.3, 2.4]",
-                    "time.output_interval=0.02"]
-            record = run(hydro, self.out("stability", "tall"), tall, 1.0, timeout=600)
-            if record["status"] == 0:
-                record.update(hydrostatic_metrics(record["result"], 0.02, SETTLE, depth=2.0))
-                record["note"] = (f"mean bottom-pressure error {100 * record['bottom_mean']:+.1f} %, "
-                                  f"std {100 * record['bottom_std']:.1f} % of rho g H")
-            rows.append(("hydrostatic, column 10x higher (H = 2 m, l0 = 2 cm)", "H = 2 m", record))
-            same = run(hydro, self.out("stability", "short"), ["particles.spacing=0.02",
-                       "time.output_interval=0.02", "domain.lower=[-0.1, -0.1]",
-                       "domain.upper=[0.3, 0.36]"], 1.0, timeout=600)
-            if same["status"] == 0:
-                same.update(hydrostatic_metrics(same["result"], 0.02, SETTLE, depth=DEPTH))
-                same["note"] = (f"mean bottom-pressure error {100 * same['bottom_mean']:+.1f} %, "
-                                f"std {100 * same['bottom_std']:.1f} % of rho g H")
-            rows.append(("hydrostatic, the case's column (H = 0.2 m, l0 = 2 cm)", "H = 0.2 m", same))
-            # A dam break whose column is ten times higher, at the same particle count.
-            spacing = 10 * COLUMN / 20
-            high = [f"particles.spacing={spacing:.10g}", "fluid_block.0.upper=[2.0, 4.0]",
-                    "tank.0.upper=[8.0, 8.0]", "domain.lower=[-0.5, -0.5]",
-                    "domain.upper=[8.5, 9.0]", "time.output_interval=0.05"]
-            rows.append(("dam break, column 10x larger (a = 2 m, l0 = a/20)", "a = 2 m",
-                         run(dam, self.out("stability", "dam_high"), high, T_DAM * math.sqrt(10),
+            rows += self.tall_rows(hydro_case)
+            # A dam break whose scene is ten times larger, at the same l0 relative to it.
+            raw = self.dam.raw_case()
+            high = [f"particles.spacing={10 * column / 20:.10g}", "time.output_interval=0.05"]
+            high += validation.scaled_overrides(raw, 10.0)
+            end = self.dam.run["until"] / analysis.dam_break_time_scale(self.dam.case(high))
+            rows.append((f"dam break, scene 10x larger (a = {10 * column:g} m, l0 = a/20)",
+                         f"a = {10 * column:g} m",
+                         run(self.dam.case_path, self.out("stability", "dam_high"), high, end,
                              timeout=600)))
         for row in rows:
             self.log(f"{row[0]} {row[1]}: {row[2]['outcome']}")
         self.table_rows.extend(rows)
 
+    def tall_rows(self, case):
+        """The still tank with a column ten times higher, and the case's own, at l0 = H/10."""
+        lower, upper = analysis.fluid_extent(case)
+        depth = upper[1] - lower[1]
+        spacing = depth / 10
+        margin = 5 * spacing
+        settle = self.hydro.study["settle_time"]
+        tall = [f"particles.spacing={spacing:.10g}",
+                f"fluid_block.0.upper=[{upper[0]:.10g}, {lower[1] + 10 * depth:.10g}]",
+                f"tank.0.upper=[{case['tank'][0]['upper'][0]:.10g}, "
+                f"{lower[1] + 11 * depth:.10g}]",
+                f"domain.lower=[{lower[0] - margin:.10g}, {lower[1] - margin:.10g}]",
+                f"domain.upper=[{upper[0] + margin:.10g}, {lower[1] + 12 * depth:.10g}]",
+                "time.output_interval=0.02"]
+        same = [f"particles.spacing={spacing:.10g}", "time.output_interval=0.02"]
+        same += margin_sets(case, spacing, margin)
+        rows = []
+        for sets, name, label in ((tall, "tall", "column 10x higher"),
+                                  (same, "short", "the case's column")):
+            record = run(self.hydro.case_path, self.out("stability", name), sets, 1.0,
+                         timeout=600)
+            height = depth * (10 if name == "tall" else 1)
+            if record["status"] == 0:
+                record.update(hydrostatic_record(record["result"], settle))
+                record["note"] = (f"mean bottom-pressure error {100 * record['bottom_mean']:+.1f} %, "
+                                  f"std {100 * record['bottom_std']:.1f} % of rho g H")
+            rows.append((f"hydrostatic, {label} (H = {height:g} m, l0 = {100 * spacing:g} cm)",
+                         f"H = {height:g} m", record))
+        return rows
+
     # -- box in flow (issue 5) -----------------------------------------------
     def box(self):
-        case = os.path.join(CASES, "box_in_flow.toml")
-        if not os.path.exists(case):
-            self.results["box"] = {"available": False}
-            self.log("box in flow: cases/box_in_flow.toml does not exist yet: skipped")
-            return
-        self.results["box"] = box_study(self, case)
+        self.results["box"] = box_study(self, self.box_check)
 
 
-def box_study(study, case):
+def box_study(study, check):
     """Box in flow: centroid at the end time against resolution; inflow and density rows.
 
     The channel's dimensions are whole multiples of 1 cm, so the resolutions
     are the case's l0, its half and its third; the box keeps its physical size (more
     nodes at the same spacing as the fluid, as a body in a fluid must).
     """
-    import tomllib
-    with open(case, "rb") as handle:
-        base = tomllib.load(handle)
-    spacing = base["particles"]["spacing"]
-    body = base["body"][0]
-    name = body.get("name", "body0")
+    base, case = check.raw_case(), check.case()
+    spacing = case["particles"]["spacing"]
+    body = case["body"][0]
+    name = body["name"] or "body0"
     end = 0.02 if study.quick else 0.3
     ranks = study.args.ranks[-1]
     records = []
@@ -432,39 +424,40 @@ def box_study(study, case):
         sets = rescale_sets(base, factor)
         if sets is None:
             continue
-        record = run(case, study.out("box", f"f{factor:g}"), sets, end, ranks=ranks,
+        record = run(check.case_path, study.out("box", f"f{factor:g}"), sets, end, ranks=ranks,
                      timeout=1800)
         record.update(spacing=spacing * factor, factor=factor)
         if record["status"] == 0:
-            record["centroid"] = body_centroid(record["result"], name)
+            record["centroid"] = analysis.solid_series(record["result"],
+                                                       name)["centroid"][-1].tolist()
         records.append(record)
         study.log(f"box in flow l0 x{factor:g}: {record['outcome']}, "
                   f"centroid {record.get('centroid')}, wall {record.get('wall', math.nan):.1f} s")
     short_end = 0.02 if study.quick else 0.2
-    if base.get("inlet"):
-        velocity = base["inlet"][0]["velocity"]
+    if case["inlet"]:
+        velocity = case["inlet"][0]["velocity"]
         for scale in (() if study.quick else (2.0, 5.0, 10.0)):
             # The inlet and the initial water, so the start is not impulsive.
             sets = [f"inlet.0.velocity=[{scale * velocity[0]:.10g}, {scale * velocity[1]:.10g}]"]
-            for k, block in enumerate(base.get("fluid_block", [])):
-                v = block.get("velocity", [0.0, 0.0])
+            for k, block in enumerate(case["fluid_block"]):
+                v = block["velocity"]
                 sets.append(f"fluid_block.{k}.velocity=[{scale * v[0]:.10g}, {scale * v[1]:.10g}]")
-            record = run(case, study.out("box", f"u{scale:g}"), sets, short_end, ranks=ranks,
-                         timeout=900)
+            record = run(check.case_path, study.out("box", f"u{scale:g}"), sets, short_end,
+                         ranks=ranks, timeout=900)
             study.log(f"box in flow {scale:g} U0: {record['outcome']}")
             study.table_rows.append(("box in flow, inflow velocity",
                                      f"{scale:g} × U0 = {scale * abs(velocity[0] or velocity[1]):g} m/s, "
                                      f"to t = {short_end:g} s", record))
-    rho = base.get("fluid", {}).get("density", RHO)
+    rho = case["fluid"]["density"]
     for ratio in (() if study.quick else (0.1, 0.5, 2.0, 10.0)):
-        sets = ([f"body.0.density={ratio * rho:.10g}"] if "node_mass" not in body else
+        sets = ([f"body.0.density={ratio * rho:.10g}"] if not body["node_mass"] else
                 [f"body.0.node_mass={body['node_mass'] * ratio:.10g}"])
-        record = run(case, study.out("box", f"rho{ratio:g}"), sets, short_end, ranks=ranks,
-                     timeout=900)
+        record = run(check.case_path, study.out("box", f"rho{ratio:g}"), sets, short_end,
+                     ranks=ranks, timeout=900)
         study.log(f"box in flow density ratio {ratio:g}: {record['outcome']}")
         study.table_rows.append(("box in flow, solid/fluid density", f"ratio {ratio:g}, "
                                  f"to t = {short_end:g} s", record))
-    return {"available": True, "records": records, "end": end, "ranks": ranks}
+    return {"records": records, "end": end, "ranks": ranks}
 
 
 def rescale_sets(base, factor):
@@ -486,79 +479,15 @@ def rescale_sets(base, factor):
     return sets
 
 
-def body_centroid(path, name):
-    import h5py
-    with h5py.File(path, "r") as handle:
-        names = list(handle["solids"])
-        group = handle["solids"][name if name in names else names[0]]
-        return group["centroid"][-1].tolist()
+def substeps_per_step(case):
+    """Automatic substeps per outer step of the case's first body (the solver's own rule)."""
+    from parmps.solids.mass_spring.model import MassSpringModel
+    system = MassSpringModel.from_case(case)
+    body = case["body"][0]
+    return system.substep_counts(case["time"]["fixed_dt"])[body["name"] or "body0"]
 
 
 # --------------------------------------------------------------------------
-# Measurements
-
-def hydrostatic_metrics(path, spacing, settle, depth=DEPTH):
-    """Pressure error of a still tank, relative to rho g H.
-
-    - ``mean_error``: RMS over the fluid (but the top row) of the time-averaged
-      error after ``settle`` (analysis.hydrostatic_error);
-    - ``bottom_mean`` / ``bottom_std``: mean and standard deviation over time of
-      the bottom row's mean pressure error (the pressure noise);
-    - ``noise``: RMS over particles and frames of the instantaneous error;
-    - ``speed_rms``: RMS fluid speed in the last frame (the surface "boiling").
-    """
-    from parmps.tools import analysis
-    from parmps.core.particles import FLUID
-    frames = analysis.frames(path)
-    first = frames[0]
-    fluid = first["kind"] == FLUID
-    y0 = first["position"][:, 1]
-    bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
-    interior = fluid & (y0 < depth - spacing)
-    scale = RHO * G * depth
-    series, noise = [], []
-    for frame in frames:
-        if frame["time"] < settle:
-            continue
-        error = (frame["pressure"] - RHO * G * (depth - frame["position"][:, 1])) / scale
-        series.append(error[bottom].mean())
-        noise.append(np.sqrt(np.mean(error[interior] ** 2)))
-    _, rms = analysis.hydrostatic_error(path, depth, RHO, G, settle, spacing)
-    last = frames[-1]
-    speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
-    return {"mean_error": rms, "bottom_mean": float(np.mean(series)),
-            "bottom_std": float(np.std(series)), "noise": float(np.mean(noise)),
-            "speed_rms": float(np.sqrt(np.mean(speed ** 2))),
-            "bottom_series": [float(v) for v in series],
-            "bottom_times": [float(f["time"]) for f in frames if f["time"] >= settle]}
-
-
-def solid_tip(path):
-    """Time and y of the 7x7 body's top middle node (node 45), frame by frame."""
-    import h5py
-    times, ys = [], []
-    with h5py.File(path, "r") as handle:
-        for name in sorted(handle["frames"]):
-            group = handle["frames"][name]
-            times.append(group.attrs["time"])
-            ys.append(group["solids/block/position"][45, 1])
-    return np.array(times), np.array(ys)
-
-
-def substeps_per_step(k):
-    """Automatic substeps per outer step of the 7x7 body at stiffness k (the solver's own rule)."""
-    import tomllib
-
-    from parmps import config, schema
-    from parmps.solids.mass_spring.model import MassSpringModel
-    with open(os.path.join(CASES, "mass_spring_7x7.toml"), "rb") as handle:
-        raw = tomllib.load(handle)
-    raw["body"][0]["stiffness"] = k
-    raw["body"][0]["shear_stiffness"] = k
-    system = MassSpringModel.from_case(schema.validate(raw))
-    return system.substep_counts(raw["time"]["fixed_dt"])["block"]
-
-
 # --------------------------------------------------------------------------
 # The report
 
@@ -621,9 +550,11 @@ def write_report(study, docs, command):
     if records:
         figure, axes = plt.subplots(1, 2, figsize=(9, 3.8))
         add("## Dam break: surge front against Martin & Moyce (1952), error against wall time\n")
-        add("RMS relative error of the front Z = x/a for T <= 3, unshifted and with the best "
-            "constant delay of the experiment's start, against the loop wall time; "
-            "run to T = 3.4.\n")
+        dam = study.dam
+        until = dam.metric["compare_until"]
+        add(f"RMS relative error of the front Z = x/a for T <= {until:g}, unshifted and with "
+            "the best constant delay of the experiment's start, against the loop wall time; "
+            f"run to T = {dam.run['until']:g} (`validation/dam_break/`).\n")
         add("| ranks | l0 | steps | wall [s] | RMS error | RMS error, delayed | delay T |")
         add("| --- | --- | --- | --- | --- | --- | --- |")
         for ranks in sorted({r["ranks"] for r in records}):
@@ -648,11 +579,11 @@ def write_report(study, docs, command):
                 for r in mine:
                     t, z = r["curve"]
                     axes[1].plot(t, z, "-", lw=1, label=f"a/{r['m']}")
-        from parmps.tools import analysis
-        t_exp, z_exp = analysis.martin_moyce()
+        reference = analysis.reference_table(dam.reference)
+        t_exp, z_exp = reference["T"], reference["Z"]
         axes[1].plot(t_exp, z_exp, "ko", mfc="none", ms=4, label="Martin & Moyce")
         axes[0].set_xlabel("loop wall time [s]")
-        axes[0].set_ylabel("RMS relative front error, T <= 3")
+        axes[0].set_ylabel(f"RMS relative front error, T <= {until:g}")
         axes[0].legend(fontsize=7)
         axes[0].grid(alpha=0.3, which="both")
         axes[1].set_xlabel(r"$T = t\sqrt{2g/a}$")
@@ -675,7 +606,8 @@ def write_report(study, docs, command):
     if records:
         add("## Hydrostatic tank: time-averaged pressure error against wall time\n")
         add("Error of the time-averaged pressure against rho g (H - y), RMS over the fluid "
-            f"(top row excluded), relative to rho g H, frames after t = {SETTLE} s; and the "
+            f"(top row excluded), relative to rho g H, frames after t = {study.hydro.study['settle_time']} s "
+            "(or half the run); and the "
             "pressure noise (standard deviation over time of the bottom row's pressure).\n")
         add("| ranks | l0 | fluid rows | end [s] | wall [s] | time-avg. error | bottom mean | "
             "bottom std | RMS speed at end [m/s] |")
@@ -714,10 +646,11 @@ def write_report(study, docs, command):
     if records:
         add("## Pressure schemes compared\n")
         add("`density`: the default source, relaxation 0.2 times the number-density deviation "
-            "(DESIGN.md §1.2). `mixed`: Tanaka & Masunaga's divergence of u* plus a weak "
-            "density term at the start-of-step positions (`[mps] source_term = \"mixed\"`, "
-            "`mixed_relaxation` 0.01). Hydrostatic: median wall time of repeats; dam break: "
-            "one run each.\n")
+            "(docs/design.md §1.4). `mixed`: Tanaka & Masunaga's divergence of u* plus a weak "
+            "density term at the start-of-step positions. Overrides of each: " + "; ".join(
+                f"{label}: " + (", ".join(f"`{item}`" for item in sets) or "none")
+                for label, sets in PRESSURE_SCHEMES.items()) +
+            ". Hydrostatic: median wall time of repeats; dam break: one run each.\n")
         add("| scheme | case | l0 | outcome | wall [s] | time-avg. error | bottom mean | "
             "bottom std (noise) | RMS speed at end | front RMS | front RMS, delayed | "
             "mean KSP its |")
@@ -830,15 +763,8 @@ def write_report(study, docs, command):
 
     # Box in flow --------------------------------------------------------------------
     box = results.get("box", {})
-    add("## Box in flow: centroid at the end time against resolution\n")
-    if not box.get("available"):
-        add("**TODO (issue 5):** `cases/box_in_flow.toml` does not exist yet in this tree, so "
-            "neither this section nor the inflow-velocity and density-ratio rows of the "
-            "stability map could be run. `scripts/study.py` has the code for them "
-            "(`box_study`: the case at l0 × 2, × 1, × 1/2 with the box's physical size kept, "
-            "the centroid at the end time, self-convergence against the finest; inflow at "
-            "2, 5, 10 × U0; solid/fluid density 0.1..10): it runs as soon as the case exists.\n")
-    else:
+    if box:
+        add("## Box in flow: centroid at the end time against resolution\n")
         records = [r for r in box["records"] if "centroid" in r]
         add("| l0 | outcome | wall [s] | centroid at end [m] | distance to finest [m] |")
         add("| --- | --- | --- | --- | --- |")
@@ -884,9 +810,6 @@ def write_report(study, docs, command):
             add(f"| {case} | {parameter} | {record['outcome'].replace('|', '/')} | "
                 f"{wall:.2f} | {record.get('note', '')} |")
         add("")
-        if not box.get("available"):
-            add("Not run (issue 5 not in this tree yet): inflow velocities up to 10 × U0 and "
-                "solid-to-fluid density ratios 0.1..10 (box in flow).\n")
         numbers["stability_nan_without_message"] = sum(
             1 for _, _, r in study.table_rows if "NON-FINITE" in r["outcome"]
             or "without a message" in r["outcome"])
@@ -895,7 +818,7 @@ def write_report(study, docs, command):
 
     add("## Guards added with this report\n")
     add("- a fluid particle inside wall material (tank walls, wall boxes) stops the run: "
-        "`parmps/guards.py`, `tests/test_guards.py`;\n"
+        "`parmps/run/guards.py`, `tests/test_guards.py`;\n"
         "- a mass-spring body that blew up (non-finite, area constraint lost beyond 10 %, "
         "a spring stretched beyond 20 × its rest length) stops the run with the step, in "
         "solid-only and coupled runs;\n"

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps
+from parmps import validation
 from parmps.fluid import ppe as pressure
 from parmps.tools import analysis
 from parmps.io.frames import FRAME_FIELDS
@@ -18,6 +19,8 @@ from parmps.run.steppers import FluidStepper
 # What a fluid run's diagnostics hold: the driver's columns and the fluid stepper's.
 DIAGNOSTICS = tuple(DRIVER_DIAGNOSTICS) + tuple(FluidStepper.DIAGNOSTICS)
 
+HYDROSTATIC = validation.load("hydrostatic")
+DAM_BREAK = validation.load("dam_break")
 # The dam break at a coarse resolution the test budget allows (a = 0.2 m, l0 = a/20).
 COARSE_DAM_BREAK = ["--set", "particles.spacing=0.01"]
 
@@ -43,20 +46,22 @@ def hydrostatic_run(tmp_path_factory):
     # 2 s, averaged after 0.5 s: the column is still settling before that (the
     # 0.3-1 s mean sits 1.7 % low), and a longer window averages out the
     # whole-column pressure swings. Measured: -1.0 % (RMS 1.1 %) here, +0.7 % on 2 ranks.
-    result = run_parmps([CASES / "hydrostatic.toml", "-o", out, "--end-time", "2.0"],
-                        timeout=300)
+    result = run_parmps([HYDROSTATIC.case_path, "-o", out,
+                         "--end-time", HYDROSTATIC.run["end_time"]], timeout=300)
     assert result.returncode == 0, result.stderr
     return out, result
 
 
 def test_hydrostatic_pressure_within_two_percent(hydrostatic_run):
     out, _ = hydrostatic_run
-    bottom, rms = analysis.hydrostatic_error(out / "result.h5", depth=0.2, density=1000.0,
-                                             gravity=9.81, settle_time=0.5, spacing=0.01)
-    assert abs(bottom) < 0.02, bottom
-    assert rms < 0.02, rms
-    # The tank's inner walls are at x = 0 and 0.2, its floor at y = 0.
-    assert analysis.escaped(out / "result.h5", [0.0, 0.0], [0.2, 0.36]) == 0
+    measured = HYDROSTATIC.measure(out / "result.h5")
+    assert abs(measured["bottom"]) < HYDROSTATIC.tolerance["bottom"], measured["bottom"]
+    assert measured["rms"] < HYDROSTATIC.tolerance["rms"], measured["rms"]
+    # No fluid beyond the tank's inner walls and floor.
+    case = HYDROSTATIC.case()
+    tank = case["tank"][0]
+    inside = (tank["lower"], [tank["upper"][0], case["domain"]["upper"][1]])
+    assert analysis.escaped(out / "result.h5", *inside) == 0
 
 
 def test_output_layout_and_xdmf(hydrostatic_run):
@@ -68,10 +73,12 @@ def test_output_layout_and_xdmf(hydrostatic_run):
         assert "[[fluid_block]]" in case["toml"] and case["ranks"] == 1
         assert case["parmps_version"]
         frames = sorted(handle["frames"])
-        # 2 s with a frame every 0.02 s, plus the initial frame.
-        assert frames[0] == "00000000" and len(frames) == 101
+        # A frame every output interval to the end time, plus the initial frame (101).
+        end = HYDROSTATIC.run["end_time"]
+        interval = HYDROSTATIC.case()["time"]["output_interval"]
+        assert frames[0] == "00000000" and len(frames) == round(end / interval) + 1
         last = handle["frames"][frames[-1]]
-        assert last.attrs["time"] == pytest.approx(2.0)
+        assert last.attrs["time"] == pytest.approx(end)
         for name in FRAME_FIELDS:
             assert len(last[name]) == 752
         assert last["id"].dtype == np.int64 and last["kind"].dtype == np.int8
@@ -149,11 +156,6 @@ def test_dam_break_front_against_martin_moyce(tmp_path):
     result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--end-time", "0.33",
                          "--set", "time.output_interval=0.01"] + COARSE_DAM_BREAK, timeout=600)
     assert result.returncode == 0, result.stderr
-    rms, *_ = analysis.dam_break_error(tmp_path / "result.h5", column_width=0.2, wall_x=0.0,
-                                       spacing=0.01)
-    assert rms < DAM_BREAK_TOLERANCE, rms
-
-
-# Measured 0.13 at l0 = a/20 and 0.14 at a/40 (see README): the simulated front
-# leads the experiment most early on (T < 2), however fine l0 is.
-DAM_BREAK_TOLERANCE = 0.15
+    # The simulated front leads the experiment most early on (T < 2), however fine l0 is.
+    rms = DAM_BREAK.measure(tmp_path / "result.h5")["rms"]
+    assert rms < DAM_BREAK.tolerance["rms"], rms

@@ -21,6 +21,7 @@ from conftest import error_lines, run_parmps
 from parmps import config, schema
 from parmps.core import scene
 from parmps.run import guards
+from parmps.io.frames import read_frames
 from parmps.tools import analysis
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.boundaries.walls import MovingWalls, travel
@@ -124,7 +125,7 @@ def test_box_ends_where_it_should_with_its_dummies(tmp_path):
     path.write_text(BOX_CASE)
     result = run_parmps([path, "-o", tmp_path / "out"], timeout=60)
     assert result.returncode == 0, result.stderr
-    frames = analysis.frames(tmp_path / "out" / "result.h5")
+    frames = read_frames(tmp_path / "out" / "result.h5")
     first = frames[0]
     x, y = first["position"].T
     box = (first["kind"] != FLUID) & (x > 0.05) & (x < 0.11) & (y > 0.15) & (y < 0.21)
@@ -155,7 +156,7 @@ def test_check_takes_the_wall_speed_into_the_first_step(tmp_path):
 
 
 def _piston_frames(path):
-    return analysis.frames(path / "result.h5")
+    return read_frames(path / "result.h5")
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,10 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps, run_python
+from parmps import validation
 from parmps.tools import analysis
+
+HYDROSTATIC = validation.load("hydrostatic")
 
 FAULT = Path(__file__).parent / "mpi" / "raise_on_one_rank.py"
 SOLID_FAULT = Path(__file__).parent / "mpi" / "raise_in_solid_run.py"
@@ -69,14 +72,17 @@ def test_hydrostatic_pressure_on_two_ranks(tmp_path):
     # every ~100 steps and the runs part ways after ~700 steps, so this checks the physics,
     # not agreement with one rank, over the window of tests/test_fluid.py (2 s, averaged
     # after 0.5 s).
-    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "2.0",
+    result = run_parmps([HYDROSTATIC.case_path, "-o", tmp_path,
+                         "--end-time", HYDROSTATIC.run["end_time"],
                          "-pressure_ksp_rtol", "1e-12"], ranks=2, timeout=300)
     assert result.returncode == 0, result.stderr
-    bottom, rms = analysis.hydrostatic_error(tmp_path / "result.h5", depth=0.2, density=1000.0,
-                                             gravity=9.81, settle_time=0.5, spacing=0.01)
-    assert abs(bottom) < 0.02, bottom
-    assert rms < 0.02, rms
-    assert analysis.escaped(tmp_path / "result.h5", [0.0, 0.0], [0.2, 0.36]) == 0
+    measured = HYDROSTATIC.measure(tmp_path / "result.h5")
+    assert abs(measured["bottom"]) < HYDROSTATIC.tolerance["bottom"], measured["bottom"]
+    assert measured["rms"] < HYDROSTATIC.tolerance["rms"], measured["rms"]
+    case = HYDROSTATIC.case()
+    tank = case["tank"][0]
+    inside = (tank["lower"], [tank["upper"][0], case["domain"]["upper"][1]])
+    assert analysis.escaped(tmp_path / "result.h5", *inside) == 0
 
 
 @pytest.mark.mpi

@@ -7,7 +7,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from parmps import config, schema
+from parmps import config, schema, validation
 from parmps.solids.mass_spring.build import build_bodies, lattice_geometry
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, area_gradient, polygon_area
@@ -162,17 +162,20 @@ def run_case(path, dt_outer=None):
 
 
 def test_7x7_case_keeps_its_area_with_the_constraint():
-    time, errors, case = run_case(CASES / "mass_spring_7x7.toml")
+    check = validation.load("mass_spring_7x7")
+    time, errors, case = run_case(check.case_path)
     assert np.all(np.isfinite(errors))
-    assert np.max(np.abs(errors)) < 1e-6
+    assert np.max(np.abs(errors)) < check.tolerance["volume_error"]
 
 
 def test_7x7_case_loses_area_without_the_constraint():
-    time, errors, case = run_case(CASES / "mass_spring_7x7_free.toml")
+    check = validation.load("mass_spring_7x7")
+    time, errors, case = run_case(check.other_cases["unconstrained"])
     load = case["body"][0]["load"][0]
     loaded = (time > load["start"] + load["ramp"]) & (time < load["end"])
     # Percent level while pressed, and the constrained case is not.
-    assert 1e-2 < np.max(np.abs(errors[loaded])) < 0.1
+    low, high = check.tolerance["unconstrained_volume_error"]
+    assert low < np.max(np.abs(errors[loaded])) < high
 
 
 # ---------------------------------------------------------------------------

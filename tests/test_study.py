@@ -9,6 +9,7 @@ import json
 import math
 
 from conftest import ROOT, run_python
+from parmps import validation
 
 
 def test_quick_study_writes_a_finite_report(tmp_path):
@@ -39,8 +40,9 @@ def test_quick_study_writes_a_finite_report(tmp_path):
     assert {r["ranks"] for r in dam} == {1, 2}
     for r in dam + report["results"]["hydrostatic"]:
         assert r["status"] == 0 and math.isfinite(r["wall"]) and r["finite"], r["command"]
+    tolerance = validation.load("dam_break").tolerance["rms_coarse"]
     for r in dam:
-        assert 0 < r["rms"] < 0.3 and 0 < r["rms_shifted"] <= r["rms"]
+        assert 0 < r["rms"] < tolerance and 0 < r["rms_shifted"] <= r["rms"]
     # The same dam break on 1 and 2 ranks gives the same front (rank-count independence).
     by_rank = {r["ranks"]: r["rms"] for r in dam if r["m"] == max(x["m"] for x in dam)}
     assert math.isclose(by_rank[1], by_rank[2], rel_tol=1e-6)

@@ -11,7 +11,6 @@ import os
 import numpy as np
 
 from parmps.io.xdmf import write_xdmf
-from parmps.parallel.slabs import by_id_blocks
 
 FRAME_FIELDS = ("id", "kind", "position", "velocity", "pressure", "number_density")
 FRAME_ATTRIBUTES = ("time", "step", "dt")
@@ -46,6 +45,8 @@ class FrameWriter:
         The particles are first regrouped by blocks of ids, so the frame is one
         array in ascending id whatever the rank count.
         """
+        # Here, not at the top: reading frames back must not start MPI.
+        from parmps.parallel.slabs import by_id_blocks
         owned, offset, total = by_id_blocks(particles, self.comm)
         count = len(owned)
         group = self.frames.create_group(f"{step:08d}")

@@ -1,95 +1,280 @@
-"""Post-processing shared by the tests and the validation scripts."""
+"""Post-processing shared by the tests and the validation scripts.
 
-import os
+The validation metrics take a result file and the case that made it (a validated
+case, as ``parmps.schema.validate`` returns it; ``result_case`` reads the one a result
+file was run with, overrides included). Every physical constant they need (column
+width, depth, density, gravity, spacing) comes from that case, never from a constant
+here. Which metric judges which case, and its tolerances: ``validation/<name>/``.
+"""
+
+import math
 
 import numpy as np
 
 from parmps.core.particles import FLUID
-
-DATA = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data")
-
-
-def martin_moyce():
-    """Martin & Moyce (1952) n^2 = 2 surge front: arrays T = t sqrt(2g/a), Z = x/a."""
-    table = np.loadtxt(os.path.join(DATA, "martin_moyce_1952_surge_front.csv"),
-                       delimiter=",", comments="#", skiprows=4)
-    return table[:, 0], table[:, 1]
+from parmps.io.frames import read_frames
 
 
-def frames(path):
-    """Every frame of a result file, each a dict of arrays sorted by id."""
+# --------------------------------------------------------------------------
+# Reading results
+
+def result_case(path):
+    """The validated case a result file was run with (its --set and --end-time included)."""
     import h5py
-    out = []
-    with h5py.File(path, "r") as handle:
-        for name in sorted(handle["frames"]):
-            group = handle["frames"][name]
-            order = np.argsort(group["id"][()], kind="stable")
-            frame = {key: group[key][()][order] for key in
-                     ("id", "kind", "position", "velocity", "pressure", "number_density")}
-            frame.update({key: group.attrs[key] for key in ("time", "step", "dt")})
-            out.append(frame)
-    return out
 
+    from parmps import config, schema
+    with h5py.File(path, "r") as handle:
+        text = handle["case"].attrs["toml"]
+    return schema.validate(config.load_text(text, str(path)))
+
+
+
+def run_summary(path):
+    """Loop wall time, steps, last time, mean KSP iterations and finiteness of a result file.
+
+    An empty dict when the file is missing or has no diagnostics (a run that never started).
+    """
+    import h5py
+    try:
+        with h5py.File(path, "r") as handle:
+            diagnostics = handle["diagnostics"]
+            wall = diagnostics["wall_seconds"][()]
+            names = sorted(handle["frames"]) if "frames" in handle else []
+            finite = True
+            if names:
+                last = handle["frames"][names[-1]]
+                finite = bool(np.all(np.isfinite(last["position"][()])) and
+                              np.all(np.isfinite(last["velocity"][()])))
+            steps = len(wall)
+            return {"wall": float(wall[-1]) if steps else 0.0,
+                    "steps": int(steps),
+                    "end": float(diagnostics["time"][-1]) if steps else 0.0,
+                    "finite": finite,
+                    "ksp_mean": float(np.mean(diagnostics["ksp_iterations"][()]))
+                    if steps else 0.0}
+    except (OSError, KeyError):
+        return {}
+
+
+def reference_table(path):
+    """A reference CSV (``#`` comment lines naming its source, then a header row) as columns."""
+    with open(path) as handle:
+        lines = [line.strip() for line in handle if line.strip() and not line.startswith("#")]
+    names = [name.strip() for name in lines[0].split(",")]
+    values = np.array([[float(v) for v in line.split(",")] for line in lines[1:]])
+    return {name: values[:, k] for k, name in enumerate(names)}
+
+
+def log_slope(x, y):
+    """Least-squares slope of log y against log x (an observed order); NaN below two points."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    keep = (x > 0) & (y > 0) & np.isfinite(x) & np.isfinite(y)
+    if keep.sum() < 2:
+        return math.nan
+    return float(np.polyfit(np.log(x[keep]), np.log(y[keep]), 1)[0])
+
+
+# --------------------------------------------------------------------------
+# What a case says about its own geometry
+
+def gravity(case):
+    """|g| [m/s^2] of a case."""
+    return float(np.hypot(*case["physics"]["gravity"]))
+
+
+def fluid_extent(case):
+    """Lower-left and upper-right corners of the bounding box of a case's fluid blocks."""
+    blocks = case["fluid_block"]
+    if not blocks:
+        raise ValueError("the case has no [[fluid_block]]")
+    lower = np.min([block["lower"] for block in blocks], axis=0)
+    upper = np.max([block["upper"] for block in blocks], axis=0)
+    return lower, upper
+
+
+def dam_break_time_scale(case):
+    """sqrt(2 g / a) [1/s] of a dam break: T = t sqrt(2 g / a), a the column's width."""
+    lower, upper = fluid_extent(case)
+    return math.sqrt(2.0 * gravity(case) / (upper[0] - lower[0]))
+
+
+# --------------------------------------------------------------------------
+# Dam break: the surge front against Martin & Moyce
 
 def surge_front(path, wall_x, spacing):
     """Times and leading-edge x positions of the fluid (max x of fluid plus half a spacing)."""
     times, fronts = [], []
-    for frame in frames(path):
+    for frame in read_frames(path):
         fluid = frame["kind"] == FLUID
         times.append(frame["time"])
         fronts.append(frame["position"][fluid, 0].max() + 0.5 * spacing - wall_x)
     return np.array(times), np.array(fronts)
 
 
-def dam_break_error(path, column_width, wall_x, spacing, gravity=9.81, t_max=3.0):
-    """RMS relative error of the simulated front against Martin & Moyce for T <= t_max.
+def surge_front_error(path, case, reference, compare_until=3.0, delay_range=(0.0, 0.6),
+                      delay_step=0.005):
+    """The dam break's front Z = x/a against T = t sqrt(2 g / a), compared with a measured one.
 
-    Returns (rms, T_sim, Z_sim, T_exp, Z_exp).
+    ``reference``: a CSV with columns T and Z (Martin & Moyce's). The column (width a,
+    its left side the wall the front is measured from), gravity and l0 come from
+    ``case``. Returns a dict: ``rms``, the RMS relative error of the front at the
+    measured points with T <= compare_until; ``rms_delayed`` and ``delay``, the same
+    with the best constant delay of the experiment's start in ``delay_range`` (the
+    simulated release is instant, the experiment's is not); the curves ``T``, ``Z``
+    (simulated) and ``T_reference``, ``Z_reference``.
     """
-    times, fronts = surge_front(path, wall_x, spacing)
-    scale = np.sqrt(2.0 * gravity / column_width)
-    t_sim, z_sim = times * scale, fronts / column_width
-    t_exp, z_exp = martin_moyce()
-    keep = t_exp <= t_max
-    if t_sim[-1] < t_exp[keep][-1]:
-        raise ValueError(f"the run ends at T = {t_sim[-1]:.3g}, before T = {t_exp[keep][-1]}")
-    z_at = np.interp(t_exp[keep], t_sim, z_sim)
-    rms = float(np.sqrt(np.mean(((z_at - z_exp[keep]) / z_exp[keep]) ** 2)))
-    return rms, t_sim, z_sim, t_exp, z_exp
+    lower, upper = fluid_extent(case)
+    width = upper[0] - lower[0]
+    times, fronts = surge_front(path, lower[0], case["particles"]["spacing"])
+    t_sim, z_sim = times * dam_break_time_scale(case), fronts / width
+    table = reference_table(reference)
+    t_ref, z_ref = table["T"], table["Z"]
+    keep = t_ref <= compare_until
+    if t_sim[-1] < t_ref[keep][-1]:
+        raise ValueError(f"the run ends at T = {t_sim[-1]:.3g}, before T = {t_ref[keep][-1]}")
+
+    def rms(delay):
+        z_at = np.interp(t_ref[keep] - delay, t_sim, z_sim)
+        return float(np.sqrt(np.mean(((z_at - z_ref[keep]) / z_ref[keep]) ** 2)))
+
+    count = int(round((delay_range[1] - delay_range[0]) / delay_step)) + 1
+    delays = np.linspace(delay_range[0], delay_range[1], count)
+    delayed = [rms(d) for d in delays]
+    best = int(np.argmin(delayed))
+    return {"rms": rms(0.0), "rms_delayed": delayed[best], "delay": float(delays[best]),
+            "T": t_sim, "Z": z_sim, "T_reference": t_ref, "Z_reference": z_ref,
+            "compare_until": compare_until}
 
 
-def hydrostatic_error(path, depth, density, gravity, settle_time, spacing):
-    """Time-averaged pressure error against rho g (H - y) after ``settle_time``.
+# --------------------------------------------------------------------------
+# Still tank: pressure against rho g (H - y)
 
-    Each particle's error is taken at its current depth in every frame and
-    averaged over the frames, so particles that drift are compared with the
-    pressure where they are. Returns (bottom error, RMS error), both relative to
-    rho g H: the bottom error is the mean over the initial bottom fluid row; the
-    RMS runs over every fluid particle but the initial top row, where the
-    free-surface condition sets P = 0 half a spacing below the surface.
+def hydrostatic_pressure_error(path, case, settle_time):
+    """Pressure error of a still tank after ``settle_time``, relative to rho g H.
+
+    The water's floor, surface (so H), density and gravity come from ``case``. Each
+    particle's error is taken at its current depth in every frame. Returns a dict:
+
+    - ``bottom``: the time-averaged error, mean over the initial bottom fluid row;
+    - ``rms``: RMS over every fluid particle but the initial top row (where the
+      free-surface condition sets P = 0 half a spacing below the surface) of the
+      time-averaged error;
+    - ``bottom_std``, ``bottom_series``, ``bottom_times``: the bottom row's mean error
+      frame by frame and its standard deviation over time (the pressure noise);
+    - ``noise``: RMS over particles and frames of the instantaneous error;
+    - ``speed_rms``: RMS fluid speed in the last frame (the surface "boiling").
     """
-    all_frames = frames(path)
+    lower, upper = fluid_extent(case)
+    surface, depth = upper[1], upper[1] - lower[1]
+    spacing = case["particles"]["spacing"]
+    density, g = case["fluid"]["density"], gravity(case)
+    all_frames = read_frames(path)
     selected = [f for f in all_frames if f["time"] >= settle_time]
     if not selected:
         raise ValueError(f"no frame after t = {settle_time}")
     first = all_frames[0]
     fluid = first["kind"] == FLUID
     y0 = first["position"][:, 1]
-    error = np.mean([f["pressure"] - density * gravity * (depth - f["position"][:, 1])
-                     for f in selected], axis=0)
-    scale = density * gravity * depth
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
-    interior = fluid & (y0 < depth - spacing)
-    rms = np.sqrt(np.mean(error[interior] ** 2)) / scale
-    return float(error[bottom].mean() / scale), float(rms)
+    interior = fluid & (y0 < surface - spacing)
+    scale = density * g * depth
+    errors = np.array([(f["pressure"] - density * g * (surface - f["position"][:, 1])) / scale
+                       for f in selected])
+    mean_error = errors.mean(axis=0)
+    series = errors[:, bottom].mean(axis=1)
+    last = all_frames[-1]
+    speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
+    return {"bottom": float(mean_error[bottom].mean()),
+            "rms": float(np.sqrt(np.mean(mean_error[interior] ** 2))),
+            "bottom_std": float(np.std(series)),
+            "bottom_series": series.tolist(),
+            "bottom_times": [float(f["time"]) for f in selected],
+            "noise": float(np.mean(np.sqrt(np.mean(errors[:, interior] ** 2, axis=1)))),
+            "speed_rms": float(np.sqrt(np.mean(speed ** 2)))}
 
 
 def escaped(path, lower, upper):
     """Number of fluid particles outside the rectangle [lower, upper] in any frame."""
     count = 0
-    for frame in frames(path):
+    for frame in read_frames(path):
         fluid = frame["kind"] == FLUID
         position = frame["position"][fluid]
         count = max(count, int(np.count_nonzero(np.any((position < lower) |
                                                        (position > upper), axis=1))))
     return count
+
+
+# --------------------------------------------------------------------------
+# Solids
+
+def solid_series(path, body):
+    """A body's per-step series (time, volume_error, centroid, fluid_force, ...)."""
+    import h5py
+    with h5py.File(path, "r") as handle:
+        group = handle["solids"][body]
+        return {key: group[key][()] for key in group if key != "springs"}
+
+
+def volume_error(path, case):
+    """Largest |V - V0|/V0 over every step, per constrained body of ``case`` and overall.
+
+    Returns a dict: ``volume_error`` (the largest of all) and ``bodies`` (name: largest).
+    """
+    bodies = {}
+    for k, body in enumerate(case["body"]):
+        name = body["name"] or f"body{k}"
+        bodies[name] = float(np.abs(solid_series(path, name)["volume_error"]).max())
+    return {"volume_error": max(bodies.values()) if bodies else 0.0, "bodies": bodies}
+
+
+def lattice_top_middle(body):
+    """Index of a lattice body's top-row middle node (node i + nx j, row by row from below)."""
+    return body["nx"] * (body["ny"] - 1) + body["nx"] // 2
+
+
+def tip_trajectory(path, case):
+    """Time and y of the first body's top-row middle node, frame by frame."""
+    import h5py
+    body = case["body"][0]
+    name, node = body["name"] or "body0", lattice_top_middle(body)
+    times, ys = [], []
+    with h5py.File(path, "r") as handle:
+        for frame in sorted(handle["frames"]):
+            group = handle["frames"][frame]
+            times.append(group.attrs["time"])
+            ys.append(group[f"solids/{name}/position"][node, 1])
+    return np.array(times), np.array(ys)
+
+
+def lattice_area(body):
+    """Area [m^2 per unit depth] of the fluid a lattice body displaces: one l0^2 per node."""
+    return body["nx"] * body["ny"] * body["spacing"] ** 2
+
+
+def buoyancy_error(path, case, settle_time):
+    """The fluid force on the first body against rho g V (Archimedes), and its drift.
+
+    V is the area of the particles the body displaces; density and gravity come from
+    ``case``. Returns a dict: ``force`` and ``force_x``, the vertical force's relative
+    error and the horizontal force relative to rho g V, both averaged over the steps
+    after ``settle_time``; ``drift``, the centroid's largest travel in units of l0;
+    ``volume_error``, the largest |V - V0|/V0.
+    """
+    body = case["body"][0]
+    series = solid_series(path, body["name"] or "body0")
+    expected = case["fluid"]["density"] * gravity(case) * lattice_area(body)
+    settled = series["time"] > settle_time
+    force = series["fluid_force"][settled].mean(axis=0)
+    travel = series["centroid"] - series["centroid"][0]
+    return {"force": float(force[1] / expected - 1.0), "force_x": float(abs(force[0]) / expected),
+            "expected_force": float(expected),
+            "drift": float(np.hypot(*travel.T).max() / case["particles"]["spacing"]),
+            "volume_error": float(np.abs(series["volume_error"]).max())}
+
+
+def inflow_rate(case):
+    """Particles per second the first inlet of ``case`` lets in: |U0| x its width / l0^2."""
+    inlet = case["inlet"][0]
+    along = int(np.argmax(np.abs(inlet["velocity"])))
+    width = inlet["upper"][1 - along] - inlet["lower"][1 - along]
+    return float(np.hypot(*inlet["velocity"]) * width / case["particles"]["spacing"] ** 2)

@@ -1,0 +1,136 @@
+"""Validation cases as data: ``validation/<name>/validation.toml``.
+
+Each file names the case (``case = "cases/<name>.toml"``, relative to the
+repository), an optional reference data file beside it, the metric (a function of
+``parmps.tools.analysis`` and its keyword arguments, ``[metric]``), how a validation
+run is made (``[run]``), settings of scripts/study.py's sweeps (``[study]``),
+further cases it compares (``[other_cases]``) and the tolerances the tests assert
+(``[tolerance]``). Physical constants live in the case files only.
+
+The folder sits beside the package in a source checkout; ``load`` takes another
+``directory`` for a tree elsewhere.
+"""
+
+import os
+import tomllib
+from dataclasses import dataclass
+
+from parmps.errors import CaseError
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DIRECTORY = os.path.join(ROOT, "validation")
+FILE_NAME = "validation.toml"
+TABLES = ("metric", "run", "study", "other_cases", "tolerance")
+KEYS = ("case", "reference") + TABLES
+
+
+@dataclass(frozen=True)
+class Validation:
+    """One validation: its case, reference data, metric and tolerances (absolute paths)."""
+
+    name: str
+    folder: str
+    case_path: str
+    reference: str | None
+    metric: dict
+    run: dict
+    study: dict
+    other_cases: dict
+    tolerance: dict
+
+    @property
+    def metric_function(self):
+        """The metric: a function of ``parmps.tools.analysis``, (result, case, ...) -> dict."""
+        from parmps.tools import analysis
+        return getattr(analysis, self.metric["function"])
+
+    @property
+    def metric_arguments(self):
+        """The metric's keyword arguments from ``[metric]`` (and the reference, if any)."""
+        arguments = {key: value for key, value in self.metric.items() if key != "function"}
+        if self.reference is not None:
+            arguments["reference"] = self.reference
+        return arguments
+
+    def measure(self, result, **overrides):
+        """The metric of a result file, judged against the case that result was run with."""
+        from parmps.tools import analysis
+        arguments = dict(self.metric_arguments, **overrides)
+        return self.metric_function(result, analysis.result_case(result), **arguments)
+
+    def raw_case(self, path=None):
+        """The case file as parsed TOML (before validation): the base of --set overrides."""
+        from parmps import config
+        path = path or self.case_path
+        with open(path, "rb") as handle:
+            return config.load_text(handle.read().decode("utf-8"), path)
+
+    def case(self, overrides=(), path=None):
+        """The validated case, with ``SECTION.KEY=VALUE`` overrides applied as --set would."""
+        from parmps import config, schema
+        raw = self.raw_case(path)
+        for assignment in overrides:
+            config.apply_override(raw, assignment)
+        return schema.validate(raw)
+
+
+def names(directory=DIRECTORY):
+    """The validations present: the folders of ``directory`` holding a validation.toml."""
+    return sorted(entry for entry in os.listdir(directory)
+                  if os.path.isfile(os.path.join(directory, entry, FILE_NAME)))
+
+
+def load(name, directory=DIRECTORY):
+    """Read ``<directory>/<name>/validation.toml``; a bad file raises a one-line CaseError."""
+    folder = os.path.join(directory, name)
+    path = os.path.join(folder, FILE_NAME)
+    try:
+        with open(path, "rb") as handle:
+            raw = tomllib.load(handle)
+    except FileNotFoundError:
+        raise CaseError(f"no validation '{name}': {path} not found") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise CaseError(f"{path}: not valid TOML: {exc}") from None
+    for key in raw:
+        if key not in KEYS:
+            raise CaseError(f"{path}: unknown key '{key}' (valid: {', '.join(KEYS)})")
+    if not isinstance(raw.get("case"), str):
+        raise CaseError(f"{path}: 'case' must name the case file")
+    tables = {table: raw.get(table, {}) for table in TABLES}
+    for table, value in tables.items():
+        if not isinstance(value, dict):
+            raise CaseError(f"{path}: [{table}] must be a table")
+    if "function" not in tables["metric"]:
+        raise CaseError(f"{path}: [metric] needs 'function' (in parmps/tools/analysis.py)")
+    root = os.path.dirname(os.path.abspath(directory))
+    validation = Validation(
+        name=name, folder=folder,
+        case_path=os.path.join(root, raw["case"]),
+        reference=os.path.join(folder, raw["reference"]) if "reference" in raw else None,
+        other_cases={key: os.path.join(root, value)
+                     for key, value in tables["other_cases"].items()},
+        **{table: tables[table] for table in TABLES if table != "other_cases"})
+    missing = [p for p in [validation.case_path, validation.reference,
+                           *validation.other_cases.values()] if p and not os.path.isfile(p)]
+    if missing:
+        raise CaseError(f"{path}: {missing[0]} not found")
+    from parmps.tools import analysis
+    if not callable(getattr(analysis, validation.metric["function"], None)):
+        raise CaseError(f"{path}: metric function '{validation.metric['function']}' is not in "
+                        f"parmps/tools/analysis.py")
+    return validation
+
+
+def scaled_overrides(raw, factor):
+    """``SECTION.KEY=VALUE`` overrides that scale a case's scene by ``factor``.
+
+    ``raw``: the parsed case. Scales the domain, the fluid blocks, tanks and wall
+    boxes; the spacing is the caller's choice (l0 relative to the scene, or not).
+    """
+    overrides = [f"domain.{key}={[v * factor for v in raw['domain'][key]]}"
+                  for key in ("lower", "upper")]
+    for section in ("fluid_block", "tank", "wall_box"):
+        for index, table in enumerate(raw.get(section, [])):
+            for key in ("lower", "upper"):
+                overrides.append(f"{section}.{index}.{key}={[v * factor for v in table[key]]}")
+    return overrides

@@ -1,0 +1,88 @@
+"""validation/<name>/validation.toml: every file loads, names a case that validates, a metric
+that exists and a reference that names its source; a malformed file is refused in one line."""
+
+import os
+import shutil
+
+import pytest
+
+from parmps import validation
+from parmps.errors import CaseError
+from parmps.tools import analysis
+
+NAMES = validation.names()
+
+
+def test_the_validations_of_the_report_and_the_tests_are_present():
+    assert {"dam_break", "hydrostatic", "mass_spring_7x7", "box_in_flow", "membrane_tube",
+            "archimedes"} <= set(NAMES)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_validation_file_names_a_valid_case_a_metric_and_tolerances(name):
+    check = validation.load(name)
+    case = check.case()
+    assert case["title"]
+    for path in check.other_cases.values():
+        assert check.case(path=path)["title"]
+    assert callable(check.metric_function)
+    assert check.tolerance, f"{name}: no [tolerance]"
+    # README beside it says what is compared with what.
+    with open(f"{check.folder}/README.md") as handle:
+        assert handle.read().startswith("# ")
+
+
+@pytest.mark.parametrize("name", [n for n in NAMES if validation.load(n).reference])
+def test_reference_data_name_their_source_and_parse(name):
+    check = validation.load(name)
+    with open(check.reference) as handle:
+        assert handle.readline().startswith("# Source:")
+    table = analysis.reference_table(check.reference)
+    assert all(len(column) > 5 for column in table.values())
+
+
+def test_martin_moyce_front_starts_at_the_column_and_advances():
+    table = analysis.reference_table(validation.load("dam_break").reference)
+    assert list(table) == ["T", "Z"]
+    assert table["Z"][0] > 1.0 and (table["Z"][1:] > table["Z"][:-1]).all()
+    assert (table["T"][1:] > table["T"][:-1]).all()
+
+
+def test_case_overrides_apply_as_on_the_command_line():
+    check = validation.load("dam_break")
+    raw = check.raw_case()
+    spacing = raw["particles"]["spacing"]
+    case = check.case([f"particles.spacing={2 * spacing!r}"])
+    assert case["particles"]["spacing"] == 2 * spacing
+    scaled = check.case(validation.scaled_overrides(raw, 0.5))
+    lower, upper = analysis.fluid_extent(scaled)
+    base_lower, base_upper = analysis.fluid_extent(check.case())
+    assert upper[0] - lower[0] == pytest.approx(0.5 * (base_upper[0] - base_lower[0]))
+    # Froude similarity: T = t sqrt(2 g / a) runs faster for a smaller column.
+    assert analysis.dam_break_time_scale(scaled) == pytest.approx(
+        2 ** 0.5 * analysis.dam_break_time_scale(check.case()))
+
+
+BAD = {
+    "unknown key": ('case = "cases/hydrostatic.toml"\ntolerence = 1\n'
+                    '[metric]\nfunction = "volume_error"\n', "unknown key 'tolerence'"),
+    "no case": ('[metric]\nfunction = "volume_error"\n', "'case' must name the case file"),
+    "missing case file": ('case = "cases/none.toml"\n[metric]\nfunction = "volume_error"\n',
+                          "none.toml not found"),
+    "no metric": ('case = "cases/hydrostatic.toml"\n', "[metric] needs 'function'"),
+    "unknown metric": ('case = "cases/hydrostatic.toml"\n[metric]\nfunction = "nothing"\n',
+                       "metric function 'nothing' is not in"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(BAD))
+def test_bad_validation_file_is_refused_in_one_line(tmp_path, name):
+    text, message = BAD[name]
+    folder = tmp_path / "validation" / "bad"
+    folder.mkdir(parents=True)
+    (folder / "validation.toml").write_text(text)
+    (tmp_path / "cases").mkdir()
+    shutil.copy(os.path.join(validation.ROOT, "cases", "hydrostatic.toml"), tmp_path / "cases")
+    with pytest.raises(CaseError) as error:
+        validation.load("bad", directory=str(tmp_path / "validation"))
+    assert message in str(error.value) and "\n" not in str(error.value)
