@@ -30,7 +30,8 @@ def result_case(path):
 
 
 def run_summary(path):
-    """Loop wall time, steps, last time, mean KSP iterations and finiteness of a result file.
+    """Loop wall time, steps, last time, finiteness and (with a fluid) mean KSP iterations
+    of a result file.
 
     An empty dict when the file is missing or has no diagnostics (a run that never started).
     """
@@ -46,12 +47,14 @@ def run_summary(path):
                 finite = bool(np.all(np.isfinite(last["position"][()])) and
                               np.all(np.isfinite(last["velocity"][()])))
             steps = len(wall)
-            return {"wall": float(wall[-1]) if steps else 0.0,
-                    "steps": int(steps),
-                    "end": float(diagnostics["time"][-1]) if steps else 0.0,
-                    "finite": finite,
-                    "ksp_mean": float(np.mean(diagnostics["ksp_iterations"][()]))
-                    if steps else 0.0}
+            summary = {"wall": float(wall[-1]) if steps else 0.0,
+                       "steps": int(steps),
+                       "end": float(diagnostics["time"][-1]) if steps else 0.0,
+                       "finite": finite}
+            if "ksp_iterations" in diagnostics:  # a solid-only run solves no pressure
+                summary["ksp_mean"] = (float(np.mean(diagnostics["ksp_iterations"][()]))
+                                       if steps else 0.0)
+            return summary
     except (OSError, KeyError):
         return {}
 
