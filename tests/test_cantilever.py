@@ -12,9 +12,13 @@ within 5 % (scripts/verify_cantilever.py draws the refinement).
 """
 
 import math
+import pathlib
 
 import pytest
 
+from parmps import config
+from parmps.solids.mass_spring.body import SolidSystem
+from parmps.solids.mass_spring.statics import body_static_displacement
 from parmps.tools import cantilever
 
 SLENDERNESS = 10
@@ -63,12 +67,6 @@ def test_first_frequency_from_the_time_integrator(reference):
 
 def test_shipped_case_is_this_beam():
     """cases/elastic_cantilever.toml (6 nodes) bends statically as the 6-node beam here."""
-    import pathlib
-
-    from parmps import config
-    from parmps.solids.mass_spring.body import SolidSystem
-    from parmps.solids.mass_spring.statics import body_static_displacement
-
     text = (pathlib.Path(__file__).resolve().parents[1] / "cases"
             / "elastic_cantilever.toml").read_text()
     body = SolidSystem.from_case(config.validate(config.load_text(text))).bodies[0]
