@@ -32,11 +32,33 @@ SECTIONS = {
                                 doc="general: one stiffness per spring [N/m]"),
         "node_mass": Key("float", 0.0, ge=0.0, doc="mass of every node [kg]"),
         "density": Key("float", 0.0, ge=0.0,
-                       doc="lattice: node mass = density x spacing^2 (per unit depth)"),
-        "stiffness": Key("float", gt=0.0, doc="structural (or every) spring [N/m]"),
+                       doc="lattice: node mass = density x spacing^2 (per unit depth); "
+                           "with youngs_modulus: density x thickness x spacing^2 x the "
+                           "share of the cells the node touches"),
+        "stiffness": Key("float", None, gt=0.0,
+                         doc="structural (or every) spring [N/m]; a lattice may give "
+                             "youngs_modulus instead"),
         "shear_stiffness": Key("float", 0.0, ge=0.0,
                                doc="lattice diagonal springs [N/m]; 0 means = stiffness"),
         "damping": Key("float", 0.0, ge=0.0, doc="b in -b (v_i - v_j) [N s/m]"),
+        # Elastic material of a lattice body (parmps.solids.mass_spring.elastic).
+        "youngs_modulus": Key("float", 0.0, ge=0.0,
+                              doc="lattice: Young's modulus E [Pa]; sets the springs (and, "
+                                  "with density, the node masses) instead of stiffness"),
+        "poisson_ratio": Key("float", None, gt=-1.0, lt=0.5,
+                             doc="with youngs_modulus: nu; the lattice represents only 1/4 "
+                                 "(plane strain) or 1/3 (plane stress): another value keeps "
+                                 "E/(1-nu^2) (plane strain) or E, with a warning; default: "
+                                 "the representable one"),
+        "thickness": Key("float", 1.0, gt=0.0,
+                         doc="with youngs_modulus: out-of-plane depth t [m] of the slice"),
+        "plane": Key("str", "strain", choices=("strain", "stress"),
+                     doc="with youngs_modulus: plane strain (a slice of a long body) or "
+                         "plane stress (a thin sheet)"),
+        "damping_ratio": Key("float", 0.0, ge=0.0,
+                             doc="with youngs_modulus: damping ratio of the lattice's highest "
+                                 "mode, from dashpots along the springs (mode n gets "
+                                 "zeta omega_n/omega_max)"),
         "volume_constraint": Key("bool", True, doc="keep the boundary polygon's area"),
         "gravity": Key("bool", True, doc="feel physics.gravity"),
         "velocity": Key("vec2", [0.0, 0.0], doc="initial velocity of every node [m/s]"),

@@ -37,6 +37,7 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
+from parmps.solids.mass_spring.elastic import axial_damping_forces
 
 log = logging.getLogger(__name__)
 
@@ -189,7 +190,7 @@ class Body:
 
     def __init__(self, name, position, velocity, mass, springs, stiffness, damping,
                  boundary, volume_constraint=True, pinned=None, gravity=(0.0, 0.0),
-                 loads=(), anchors=0, outline=None):
+                 loads=(), anchors=0, outline=None, axial_damping=False):
         self.name = name
         self.position = np.array(position, dtype=float).reshape(-1, 2)
         self.velocity = np.array(velocity, dtype=float).reshape(-1, 2)
@@ -199,6 +200,9 @@ class Body:
         m = len(self.springs)
         self.stiffness = np.broadcast_to(np.asarray(stiffness, dtype=float), (m,)).copy()
         self.damping = np.broadcast_to(np.asarray(damping, dtype=float), (m,)).copy()
+        # Dashpots along the springs (elastic materials) instead of on the whole
+        # relative velocity, which would also damp a rigid rotation.
+        self.axial_damping = bool(axial_damping)
         separation = self.position[self.springs[:, 0]] - self.position[self.springs[:, 1]]
         self.rest_length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
         self.boundary = np.asarray(boundary, dtype=np.int64)
@@ -273,7 +277,8 @@ class Body:
     def acceleration_at(self, time, velocity, dt):
         """M^-1 (F - gradPhi lambda) at the current positions, for a step of length dt."""
         force = (spring_forces(self.position, self.springs, self.rest_length, self.stiffness)
-                 + damping_forces(velocity, self.springs, self.damping)
+                 + (axial_damping_forces(self.position, velocity, self.springs, self.damping)
+                    if self.axial_damping else damping_forces(velocity, self.springs, self.damping))
                  + self.external_force(time))
         if self.volume_constraint:
             loop = self.boundary

@@ -25,10 +25,11 @@ import numpy as np
 from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
+from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
 
 log = logging.getLogger(__name__)
 
-LATTICE_ONLY = ("nx", "ny", "spacing", "density", "shear_stiffness")
+LATTICE_ONLY = ("nx", "ny", "spacing", "density", "shear_stiffness", "youngs_modulus")
 GENERAL_ONLY = ("nodes", "springs", "boundary", "masses", "spring_stiffness")
 
 
@@ -180,6 +181,10 @@ def _lattice(label, spec):
     if not spacing > 0:
         raise CaseError(f"{label}.spacing must be > 0 for a lattice body, got {spacing}")
     position, springs, shear, boundary = lattice_geometry(nx, ny, spacing, spec["lower"])
+    if is_elastic(spec):
+        # Springs, masses and dashpots come from the material, in build_body.
+        return position, springs, None, None, boundary, (nx, ny)
+    check_not_elastic(label, spec)
     if spec["node_mass"] > 0 and spec["density"] > 0:
         raise CaseError(f"{label}: give node_mass or density, not both")
     if spec["node_mass"] > 0:
@@ -190,6 +195,8 @@ def _lattice(label, spec):
     else:
         raise CaseError(f"{label}: node mass must be > 0: set node_mass [kg] or density "
                         f"[kg/m^3]")
+    if spec["stiffness"] is None:
+        raise CaseError(f"{label}: missing key 'stiffness' [N/m] (or give youngs_modulus [Pa])")
     shear_stiffness = spec["shear_stiffness"] or spec["stiffness"]
     stiffness = np.where(shear, shear_stiffness, spec["stiffness"])
     return position, springs, stiffness, np.full(len(position), mass), boundary, (nx, ny)
@@ -199,6 +206,7 @@ def _general(label, spec):
     for key in LATTICE_ONLY:
         if spec[key]:
             raise CaseError(f"{label}.{key} applies to lattice bodies only")
+    check_not_elastic(label, spec)
     position = np.asarray(spec["nodes"], dtype=float).reshape(-1, 2)
     n = len(position)
     if n < 2:
@@ -210,6 +218,8 @@ def _general(label, spec):
             raise CaseError(f"{label}.spring_stiffness has {len(spec['spring_stiffness'])} "
                             f"values for {len(springs)} springs")
         stiffness = np.asarray(spec["spring_stiffness"], dtype=float)
+    elif spec["stiffness"] is None:
+        raise CaseError(f"{label}: missing key 'stiffness' [N/m] (or spring_stiffness)")
     else:
         stiffness = np.full(len(springs), spec["stiffness"])
     if spec["masses"] and spec["node_mass"] > 0:
@@ -253,6 +263,9 @@ def build_body(k, spec, gravity, domain=None):
     name = spec["name"] or f"body{k}"
     builder = _lattice if spec["type"] == "lattice" else _general
     position, springs, stiffness, mass, boundary, shape = builder(label, spec)
+    damping, axial_damping = spec["damping"], False
+    if shape is not None and is_elastic(spec):
+        stiffness, mass, damping, axial_damping, _ = elastic_lattice(label, spec, shape, springs)
     n = len(position)
     anchors = np.asarray(spec["anchors"], dtype=float).reshape(-1, 2)
     outline = boundary[boundary < n]
@@ -297,10 +310,10 @@ def build_body(k, spec, gravity, domain=None):
         velocity = np.concatenate([velocity, np.zeros((a, 2))])
         mass = np.concatenate([np.broadcast_to(mass, (n,)), np.full(a, np.mean(mass))])
         pinned = np.concatenate([pinned, np.ones(a, bool)])
-    body = Body(name, position, velocity, mass, springs, stiffness, spec["damping"], boundary,
+    body = Body(name, position, velocity, mass, springs, stiffness, damping, boundary,
                 volume_constraint=spec["volume_constraint"], pinned=pinned,
                 gravity=gravity if spec["gravity"] else (0.0, 0.0), loads=loads,
-                anchors=len(anchors), outline=outline)
+                anchors=len(anchors), outline=outline, axial_damping=axial_damping)
     log.debug("body %s: %d nodes, %d springs, area %.6g, %d pinned, %d loads", name, n,
               len(springs), body.rest_volume, int(pinned.sum()), len(loads))
     return body

@@ -1,0 +1,209 @@
+"""Elastic materials for lattice bodies: springs, masses and dashpots from E, nu, rho.
+
+A lattice body (nx x ny nodes, spacing a) with axial springs k_a (horizontal,
+vertical) and both diagonals k_d in every cell is given the spring constants
+whose homogenised (Cauchy-Born) elasticity is that of the requested material.
+The full derivation is in docs/elastic_lattice.md; in short:
+
+Under a uniform small strain eps a spring along the unit vector n changes
+length by l0 n.eps.n. Per cell (area a^2: one horizontal and one vertical
+spring, each shared by two cells, and its two diagonals of length a sqrt 2)
+the energy density is
+
+    W = k_a/2 (exx^2 + eyy^2) + k_d/2 (exx + eyy)^2 + 2 k_d exy^2
+
+so, per unit depth, C11 = k_a + k_d, C12 = C66 = k_d (independent of a).
+Isotropy, C66 = (C11 - C12)/2, needs k_a = 2 k_d; then C11 = 3 k_d, C12 = k_d,
+the 2D Poisson ratio C12/C11 = 1/3 and the 2D Young's modulus
+(C11^2 - C12^2)/C11 = 8 k_d/3. A body of depth t and 2D modulus E2 thus has
+
+    k_d = 3 E2 t / 8,    k_a = 3 E2 t / 4.
+
+Convention (``plane``): the 2D lattice is a slice of depth ``thickness`` t.
+``strain`` (default): the body is long out of the plane (eps_zz = 0), as in
+every 2D fluid-structure benchmark, where the fluid too is per unit depth.
+Then E2 = E/(1 - nu^2) and nu2 = nu/(1 - nu); the lattice's nu2 = 1/3 is
+nu = 1/4. ``stress``: a thin sheet loaded in its plane (sigma_zz = 0); E2 = E,
+nu2 = nu, and the lattice's nu is 1/3.
+
+Any other requested nu is accepted with a warning: the lattice keeps its own
+nu and matches E2 (E/(1 - nu^2) in plane strain), which makes the bending
+stiffness of a plate or beam, D = E t h^3/12(1 - nu^2) (E t h^3/12 in plane
+stress), exact; the shear modulus is then 3 E2/8 instead of E/2(1 + nu).
+
+Finite bodies: the material is the rectangle spanned by the nodes,
+(nx - 1) a x (ny - 1) a. An axial spring on an edge bounds one cell instead of
+two and gets k_a/2, so a uniform strain stores exactly (nx-1)(ny-1) cells'
+energy; each node carries a quarter of every cell it touches (mass
+rho t a^2, 1/2 of it on an edge, 1/4 at a corner), so stiffness and inertia
+describe the same rectangle.
+
+Damping (``damping_ratio`` zeta): dashpots along each spring (Kelvin-Voigt,
+``-b ((v_i - v_j).e) e``, which leaves rigid rotation undamped) with
+b = beta k, so the damping matrix is beta K at rest and every mode n has
+zeta_n = beta omega_n / 2. beta = 2 zeta / omega_max sets zeta at the highest
+mode of the lattice, omega_max^2 = 4 (k_a + k_d)/m (an x-polarised wave of
+wavenumber pi/a); lower modes get zeta omega_n/omega_max, so the body's
+bending modes are left practically undamped: it removes grid-scale ringing,
+it is not a structural damping of the fundamental mode.
+"""
+
+import logging
+import math
+from collections import namedtuple
+
+import numpy as np
+
+from parmps.errors import CaseError
+
+log = logging.getLogger(__name__)
+
+# The Poisson ratio the isotropic square lattice represents, by convention.
+REPRESENTABLE_POISSON = {"strain": 0.25, "stress": 1.0 / 3.0}
+LATTICE_POISSON_2D = 1.0 / 3.0
+
+LatticeMaterial = namedtuple("LatticeMaterial",
+                             "stiffness mass damping axial_damping properties")
+
+
+# --------------------------------------------------------------------------
+# Elastic constants
+
+
+def plane_modulus(youngs_modulus, poisson_ratio, plane):
+    """The 2D Young's modulus E2 and Poisson ratio nu2 of a slice (plane strain or stress)."""
+    if plane == "strain":
+        return youngs_modulus / (1.0 - poisson_ratio ** 2), poisson_ratio / (1.0 - poisson_ratio)
+    return youngs_modulus, poisson_ratio
+
+
+def lattice_stiffnesses(plane_youngs_modulus, thickness):
+    """Axial and diagonal spring constants [N/m] of the isotropic lattice with modulus E2."""
+    diagonal = 3.0 * plane_youngs_modulus * thickness / 8.0
+    return 2.0 * diagonal, diagonal
+
+
+def lattice_moduli(axial, diagonal):
+    """C11, C12, C66 [N/m] of the lattice with axial and diagonal springs (Cauchy-Born)."""
+    return axial + diagonal, diagonal, diagonal
+
+
+def highest_lattice_frequency(axial, diagonal, node_mass):
+    """omega_max [rad/s] of the infinite lattice: x-polarised wave with wavenumber (pi/a, 0)."""
+    return math.sqrt(4.0 * (axial + diagonal) / node_mass)
+
+
+# --------------------------------------------------------------------------
+# The lattice's springs and nodes
+
+
+def spring_kinds(shape, springs):
+    """Per spring: "horizontal", "vertical" or diagonal masks, and edge axial springs.
+
+    Nodes are numbered i + nx j (build.lattice_geometry). An axial spring whose
+    two nodes lie on the same edge row or column bounds one cell, not two.
+    """
+    nx, ny = shape
+    i, j = springs % nx, springs // nx
+    horizontal = j[:, 0] == j[:, 1]
+    vertical = i[:, 0] == i[:, 1]
+    on_edge = ((horizontal & ((j[:, 0] == 0) | (j[:, 0] == ny - 1)))
+               | (vertical & ((i[:, 0] == 0) | (i[:, 0] == nx - 1))))
+    return horizontal | vertical, on_edge
+
+
+def cell_share(shape):
+    """Fraction of a cell each node carries: 1 inside, 1/2 on an edge, 1/4 at a corner."""
+    nx, ny = shape
+    along_x = np.where((np.arange(nx) == 0) | (np.arange(nx) == nx - 1), 0.5, 1.0)
+    along_y = np.where((np.arange(ny) == 0) | (np.arange(ny) == ny - 1), 0.5, 1.0)
+    return np.outer(along_y, along_x).ravel()
+
+
+def axial_damping_forces(position, velocity, springs, damping):
+    """Dashpots along the springs, ``-b ((v_i - v_j).e) e`` with e = (x_i - x_j)/|x_i - x_j|.
+
+    Unlike ``-b (v_i - v_j)`` they exert no force on a rigid rotation. Shape (n, 2).
+    """
+    separation = position[springs[:, 0]] - position[springs[:, 1]]
+    length_squared = np.einsum("ij,ij->i", separation, separation)
+    relative = velocity[springs[:, 0]] - velocity[springs[:, 1]]
+    rate = np.einsum("ij,ij->i", relative, separation)
+    scale = np.divide(damping * rate, length_squared, out=np.zeros_like(rate),
+                      where=length_squared > 0)
+    pair_force = -scale[:, None] * separation
+    force = np.empty((len(position), 2))
+    for axis in range(2):
+        force[:, axis] = (np.bincount(springs[:, 0], weights=pair_force[:, axis],
+                                      minlength=len(position))
+                          - np.bincount(springs[:, 1], weights=pair_force[:, axis],
+                                        minlength=len(position)))
+    return force
+
+
+# --------------------------------------------------------------------------
+# From a [[body]] table
+
+
+def is_elastic(spec):
+    return spec.get("youngs_modulus", 0.0) > 0.0
+
+
+def check_not_elastic(label, spec):
+    """Refuse material keys on a body that gives no youngs_modulus (or is not a lattice)."""
+    for key, unset in (("poisson_ratio", None), ("damping_ratio", 0.0), ("plane", "strain"),
+                       ("thickness", 1.0)):
+        if spec.get(key, unset) != unset:
+            raise CaseError(f"{label}.{key} applies to a lattice body with youngs_modulus")
+
+
+def elastic_lattice(label, spec, shape, springs):
+    """Spring constants, node masses and dashpots of a lattice ``[[body]]`` with a material.
+
+    ``spec`` is the validated table (youngs_modulus > 0); ``shape`` = (nx, ny);
+    ``springs`` the lattice's index pairs. Returns a :class:`LatticeMaterial`.
+    """
+    for key in ("stiffness", "shear_stiffness", "node_mass"):
+        if spec[key]:
+            raise CaseError(f"{label}.{key} cannot be combined with youngs_modulus: the "
+                            f"material sets the springs and masses")
+    if not spec["density"] > 0:
+        raise CaseError(f"{label}.density [kg/m^3] is needed with youngs_modulus")
+    if spec["damping"] and spec["damping_ratio"]:
+        raise CaseError(f"{label}: give damping [N s/m] or damping_ratio, not both")
+    plane, thickness, spacing = spec["plane"], spec["thickness"], spec["spacing"]
+    youngs = spec["youngs_modulus"]
+    representable = REPRESENTABLE_POISSON[plane]
+    requested = representable if spec["poisson_ratio"] is None else spec["poisson_ratio"]
+    plane_youngs, _ = plane_modulus(youngs, requested, plane)
+    if abs(requested - representable) > 1e-9:
+        shear_requested = youngs / (2.0 * (1.0 + requested)) * thickness
+        shear_lattice = 3.0 * plane_youngs * thickness / 8.0
+        _, nu2_requested = plane_modulus(youngs, requested, plane)
+        log.warning("%s.poisson_ratio %.4g is not representable by the square lattice "
+                    "(plane %s: only %.4g); using %.4g with E2 = %.4g Pa matched, so the bending "
+                    "stiffness D = %s is exact; shear modulus %+.1f %%, in-plane Poisson "
+                    "ratio 1/3 instead of %.3f", label, requested, plane, representable,
+                    representable, plane_youngs,
+                    "E t h^3/12(1-nu^2)" if plane == "strain" else "E t h^3/12",
+                    100.0 * (shear_lattice / shear_requested - 1.0), nu2_requested)
+    axial, diagonal = lattice_stiffnesses(plane_youngs, thickness)
+    is_axial, on_edge = spring_kinds(shape, springs)
+    stiffness = np.where(is_axial, axial, diagonal) * np.where(on_edge, 0.5, 1.0)
+    cell_mass = spec["density"] * thickness * spacing ** 2
+    mass = cell_mass * cell_share(shape)
+    omega_max = highest_lattice_frequency(axial, diagonal, cell_mass)
+    if spec["damping_ratio"] > 0:
+        damping = 2.0 * spec["damping_ratio"] / omega_max * stiffness
+        axial_damping = True
+    else:
+        damping = np.full(len(springs), spec["damping"])
+        axial_damping = False
+    properties = {"plane_youngs_modulus": plane_youngs,
+                  "effective_poisson_ratio": representable,
+                  "axial_stiffness": axial, "diagonal_stiffness": diagonal,
+                  "omega_max": omega_max,
+                  "width": (shape[0] - 1) * spacing, "height": (shape[1] - 1) * spacing}
+    log.debug("%s: E2 = %.6g Pa, k_a = %.6g N/m, k_d = %.6g N/m, omega_max = %.6g rad/s",
+              label, plane_youngs, axial, diagonal, omega_max)
+    return LatticeMaterial(stiffness, mass, damping, axial_damping, properties)
