@@ -32,9 +32,6 @@ class EndCondition:
         """The step length that does not overshoot the end time."""
         return min(dt, self.end_time - time)
 
-    def reached(self, time):
-        return time >= self.end_time * (1 - _END_SLACK)
-
 
 class SimulatedInterval:
     """Due every ``interval`` of simulated time, and at the end time."""
@@ -76,7 +73,3 @@ class Stopwatch:
 
     def elapsed(self):
         return wallclock.perf_counter() - self.start
-
-    def seconds_left(self, time, end_time):
-        """Wall time left, extrapolated from the simulated time done so far."""
-        return self.elapsed() / time * (end_time - time) if time > 0 else 0.0

@@ -39,6 +39,7 @@ class Simulation:
         self.directory = directory
         self.end_time = case["time"]["end"] if end_time is None else end_time
         self.model = solid_model(case)
+        self.coupling = None
         self.state = RunState()
         self.pressure_solver = None
         if has_fluid(case) or self.model is None:
@@ -72,7 +73,6 @@ class Simulation:
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
         self.state.particles = self.decomposition.distribute(global_scene)
         self.fluid = FluidSolver(case, comm, self.decomposition)
-        self.coupling = None
         if self.model is not None:
             from parmps.coupling import coupling_scheme
             self.coupling = coupling_scheme(case, self.model, comm, self.fluid)
@@ -118,17 +118,15 @@ class Simulation:
         writer = FrameWriter(result, case.get("dimension", 2), self.model)
         found = list(extra) + [observing.Diagnostics(result, columns, interval, self.end_time)]
         if self.model is not None:
-            found.append(observing.BodySeries(result, self.model, self.coupling_or_none(),
-                                              interval, self.end_time))
+            found.append(observing.BodySeries(result, self.model, self.coupling, interval,
+                                              self.end_time))
         found += [observing.Frames(writer, interval, self.end_time, case["output"]["frames"]),
                   observing.Progress(self._progress_line)]
         return found
 
-    def coupling_or_none(self):
-        return getattr(self, "coupling", None)
-
     def _progress_line(self, state):
         rate = state.particle_steps / max(state.elapsed, 1e-12)
+        # Extrapolated from the simulated time done so far.
         left = state.elapsed / state.time * (self.end_time - state.time) if state.time else 0.0
         return (f"step {state.step}  t = {state.time:.4g} s  dt = {state.dt:.3g} s  "
                 f"{self.stepper.progress(state)}  {rate:.3g} particle-steps/s  "
