@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from parmps.core import kernels, operators
+from parmps.core import kernels, lattice
 from parmps.errors import RunFailure
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW
@@ -43,8 +43,10 @@ class Timers:
 class FluidSolver:
     """The constants of the MPS scheme for a case, and the step that uses them."""
 
-    def __init__(self, case, comm, decomposition, pressure_solver=None):
+    def __init__(self, case, comm, decomposition, pressure_solver=None, dimension=2):
         self.comm = comm
+        # The number of components of positions: every case is 2D for now.
+        self.dimension = dimension
         self.decomposition = decomposition
         spacing = case["particles"]["spacing"]
         mps = case["mps"]
@@ -52,11 +54,13 @@ class FluidSolver:
         self.re_number_density = mps["re_number_density"] * spacing
         self.re_laplacian = mps["re_laplacian"] * spacing
         self.search_radius = self.re_laplacian + case["parallel"]["halo_skin"] * spacing
-        self.n0, _ = operators.reference_values(spacing, self.re_number_density)
-        self.n0_laplacian, self.lambda0 = operators.reference_values(spacing, self.re_laplacian)
-        self.laplacian_coefficient = 2.0 * operators.DIMENSION / (self.lambda0 * self.n0_laplacian)
-        self.neighbour_count0 = operators.neighbour_count_reference(spacing,
-                                                                    self.re_number_density)
+        self.n0, _ = lattice.reference_values(spacing, self.re_number_density, dimension)
+        self.n0_laplacian, self.lambda0 = lattice.reference_values(spacing, self.re_laplacian,
+                                                                   dimension)
+        self.laplacian_coefficient = 2.0 * dimension / (self.lambda0 * self.n0_laplacian)
+        self.neighbour_count0 = lattice.neighbour_count_reference(spacing,
+                                                                  self.re_number_density,
+                                                                  dimension)
         self.density = case["fluid"]["density"]
         self.viscosity = case["fluid"]["viscosity"]
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
@@ -102,7 +106,7 @@ class FluidSolver:
         timers.start("operators")
         velocity_star = velocity.copy()
         position_star = position.copy()
-        acceleration = np.broadcast_to(self.gravity, (n, 2)).copy()
+        acceleration = np.broadcast_to(self.gravity, (n, self.dimension)).copy()
         if self.viscosity > 0.0:
             acceleration += (self.viscosity * self.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(indptr, cols, position, velocity,
@@ -155,7 +159,7 @@ class FluidSolver:
             # start-of-step positions; far less pressure noise than n* alone.
             current_density, _ = kernels.number_density(indptr, cols, position,
                                                         self.re_number_density, n)
-            divergence = (operators.DIMENSION / self.n0) * kernels.divergence_sum(
+            divergence = (self.dimension / self.n0) * kernels.divergence_sum(
                 indptr, cols, position_star, velocity_star, self.re_number_density, n)
             rhs[in_rows] = (-(self.density / dt) * divergence[unknown_index]
                             + self.mixed_relaxation * (self.density / dt ** 2)
@@ -179,11 +183,11 @@ class FluidSolver:
         decomposition.refresh([pressure])
 
         timers.start("operators")
-        pressure_gradient = (operators.DIMENSION / self.n0) * kernels.pressure_gradient_sum(
+        pressure_gradient = (self.dimension / self.n0) * kernels.pressure_gradient_sum(
             indptr, cols, position_star, pressure, has_pressure, self.re_number_density, n)
         if self.gradient_correction:
             kernels.correct_gradient(indptr, cols, position_star, has_pressure,
-                                     self.re_number_density, operators.DIMENSION / self.n0,
+                                     self.re_number_density, self.dimension / self.n0,
                                      pressure_gradient, self.gradient_correction_limit)
         correction = pressure_gradient[moving] / self.density
         velocity_star[:n][moving] -= dt * correction
