@@ -1,4 +1,4 @@
-"""Neighbour search on cell lists.
+"""Neighbour search on cell lists, in d dimensions (positions are N×d).
 
 The pair list is in CSR form: for each row particle i (the owned ones, which
 come first), ``indices[indptr[i]:indptr[i+1]]`` are the particles j != i within
@@ -9,51 +9,95 @@ The search is a numba kernel: a numpy cell-list search costs about 19 µs per
 particle at 40k particles (DESIGN.md §6), four times the whole step's budget.
 """
 
+import math
+
 import numba
 import numpy as np
 
 
 @numba.njit(cache=True)
-def _cell_keys(position, origin, cell_size, ncx):
-    n = position.shape[0]
-    cx = np.empty(n, np.int64)
-    cy = np.empty(n, np.int64)
+def _cell_coordinates(position, origin, cell_size):
+    """The integer cell of every particle, one column per dimension."""
+    n, d = position.shape
+    cell = np.empty((n, d), np.int64)
     for p in range(n):
-        cx[p] = int((position[p, 0] - origin[0]) / cell_size)
-        cy[p] = int((position[p, 1] - origin[1]) / cell_size)
-    return cx, cy
+        for k in range(d):
+            cell[p, k] = int((position[p, k] - origin[k]) / cell_size)
+    return cell
 
 
-@numba.njit(cache=True)
-def _search(position, n_rows, radius, cell_size, origin, ncx, ncy, order, cell_start,
-            cx, cy, count_only, indptr, indices):
+@numba.njit(cache=True, inline="always")
+def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
+              indptr, indices, d):
+    """Pairs of rows [0, n_rows) within ``radius``, over the 3^d cells around each row.
+
+    Cells are numbered key = sum_k cell_k stride_k with stride_0 = 1, so the
+    cells that differ in the first coordinate only are consecutive and their
+    particles one contiguous run of ``order``: the loop walks the 3^(d-1) such
+    runs in ascending key (in 2D: rows of cells by y, cells by x within a row).
+    """
     radius2 = radius * radius
+    lo = np.empty(d, np.int64)
+    hi = np.empty(d, np.int64)
+    at = np.empty(d, np.int64)
     total = 0
     for i in range(n_rows):
         if not count_only:
             total = indptr[i]
-        xi = position[i, 0]
-        yi = position[i, 1]
-        for ky in range(max(cy[i] - 1, 0), min(cy[i] + 2, ncy)):
-            for kx in range(max(cx[i] - 1, 0), min(cx[i] + 2, ncx)):
-                cell = ky * ncx + kx
-                for s in range(cell_start[cell], cell_start[cell + 1]):
-                    j = order[s]
-                    if j == i:
-                        continue
-                    dx = position[j, 0] - xi
-                    dy = position[j, 1] - yi
-                    if dx * dx + dy * dy < radius2:
-                        if not count_only:
-                            indices[total] = j
-                        total += 1
+        for k in range(d):
+            lo[k] = max(cell[i, k] - 1, 0)
+            hi[k] = min(cell[i, k] + 2, cells[k])
+            at[k] = lo[k]
+        while True:
+            base = 0
+            for k in range(1, d):
+                base += at[k] * stride[k]
+            for s in range(cell_start[base + lo[0]], cell_start[base + hi[0]]):
+                j = order[s]
+                if j == i:
+                    continue
+                r2 = 0.0
+                for k in range(d):
+                    delta = position[j, k] - position[i, k]
+                    r2 += delta * delta
+                if r2 < radius2:
+                    if not count_only:
+                        indices[total] = j
+                    total += 1
+            # The next run of cells: count up the coordinates 1 .. d-1 like an odometer.
+            k = 1
+            while k < d:
+                at[k] += 1
+                if at[k] < hi[k]:
+                    break
+                at[k] = lo[k]
+                k += 1
+            if k == d:
+                break
         if count_only:
             indptr[i + 1] = total
     return total
 
 
+@numba.njit(cache=True)
+def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
+            indptr, indices):
+    # d as a literal, so the component loops unroll (see parmps.core.kernels).
+    if position.shape[1] == 2:
+        return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
+                         count_only, indptr, indices, 2)
+    if position.shape[1] == 3:
+        return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
+                         count_only, indptr, indices, 3)
+    return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
+                     count_only, indptr, indices, position.shape[1])
+
+
 def pair_list(position, radius, n_rows=None):
-    """CSR neighbour lists (indptr, indices) of rows [0, n_rows) against every particle."""
+    """CSR neighbour lists (indptr, indices) of rows [0, n_rows) against every particle.
+
+    ``position`` is (N, d) for any d >= 1; the cells are d-dimensional.
+    """
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = len(position)
     n_rows = n if n_rows is None else int(n_rows)
@@ -62,22 +106,23 @@ def pair_list(position, radius, n_rows=None):
         return indptr, np.empty(0, np.int64)
     origin = position.min(axis=0) - 1e-12
     extent = position.max(axis=0) - origin
-    # Cells no smaller than the radius, so 3x3 cells hold every neighbour; larger
-    # when the particles are sparse, so the cell table stays O(n) in memory.
+    # Cells no smaller than the radius, so the 3^d cells around a particle hold
+    # every neighbour; larger when the particles are sparse, so the cell table
+    # stays O(n) in memory.
     cell_size = radius
-    while (int(extent[0] / cell_size) + 1) * (int(extent[1] / cell_size) + 1) > 4 * n + 4096:
+    while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * n + 4096:
         cell_size *= 1.5
-    ncx = int(extent[0] / cell_size) + 1
-    ncy = int(extent[1] / cell_size) + 1
-    cx, cy = _cell_keys(position, origin, cell_size, ncx)
-    key = cy * ncx + cx
+    cells = np.array([int(e / cell_size) + 1 for e in extent], np.int64)
+    stride = np.concatenate([[1], np.cumprod(cells[:-1])]).astype(np.int64)
+    cell = _cell_coordinates(position, origin, cell_size)
+    key = cell @ stride
     order = np.argsort(key, kind="stable")
-    cell_start = np.searchsorted(key[order], np.arange(ncx * ncy + 1))
-    _search(position, n_rows, radius, cell_size, origin, ncx, ncy, order, cell_start,
-            cx, cy, True, indptr, np.empty(0, np.int64))
+    cell_start = np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
+    _search(position, n_rows, radius, cells, stride, order, cell_start, cell, True, indptr,
+            np.empty(0, np.int64))
     indices = np.empty(indptr[-1], np.int64)
-    _search(position, n_rows, radius, cell_size, origin, ncx, ncy, order, cell_start,
-            cx, cy, False, indptr, indices)
+    _search(position, n_rows, radius, cells, stride, order, cell_start, cell, False, indptr,
+            indices)
     return indptr, indices
 
 

@@ -1,44 +1,19 @@
-"""MPS operators on a pair list (DESIGN.md §1.1), dimension d = 2.
+"""MPS operators on a pair list (DESIGN.md §1.1), in d dimensions.
 
 Each operator takes the pair rows ``i`` (grouped, owned particles), the pair
 columns ``j`` (owned or ghost), the pair geometry and per-particle arrays, and
-returns one value per row. Weighted sums use ``np.bincount``.
+returns one value per row. Weighted sums use ``np.bincount``. The dimension d
+is that of the positions the pair geometry was made from (``pairs.dimension``);
+the reference values n0 and lambda0 come from :mod:`parmps.core.lattice`.
 """
 
 import numpy as np
-
-DIMENSION = 2
 
 
 def weight(distance, radius):
     """w(r) = re/r - 1 for 0 < r < re, else 0."""
     safe = np.where(distance > 0.0, distance, radius)
     return np.where(distance < radius, radius / safe - 1.0, 0.0)
-
-
-def reference_values(spacing, radius, *, reach=None):
-    """n0 and lambda0 of a particle fully surrounded by the square lattice of spacing l0.
-
-    ``radius`` is re in metres. lambda0 = sum r^2 w / sum w.
-    """
-    cells = int(np.ceil(radius / spacing)) + 1 if reach is None else reach
-    offsets = np.arange(-cells, cells + 1) * spacing
-    x, y = np.meshgrid(offsets, offsets)
-    distance = np.hypot(x, y).ravel()
-    distance = distance[distance > 0]
-    w = weight(distance, radius)
-    n0 = float(w.sum())
-    lambda0 = float((distance ** 2 * w).sum() / n0)
-    return n0, lambda0
-
-
-def neighbour_count_reference(spacing, radius):
-    """How many lattice neighbours lie within ``radius`` of an interior particle."""
-    cells = int(np.ceil(radius / spacing)) + 1
-    offsets = np.arange(-cells, cells + 1) * spacing
-    x, y = np.meshgrid(offsets, offsets)
-    distance = np.hypot(x, y).ravel()
-    return int(np.count_nonzero((distance > 0) & (distance < radius)))
 
 
 class PairGeometry:
@@ -48,6 +23,7 @@ class PairGeometry:
         self.indptr = indptr
         self.rows = rows
         self.cols = cols
+        self.dimension = position.shape[1]
         self.offset = position[cols] - position[rows]
         self.distance = np.sqrt(np.einsum("pk,pk->p", self.offset, self.offset))
 
@@ -61,8 +37,8 @@ def number_density(pairs, w, n_rows):
 
 
 def laplacian(pairs, w, field, n_rows, n0, lambda0):
-    """<lap phi>_i = 2d/(lambda0 n0) sum_j (phi_j - phi_i) w_ij, for a scalar or N×2 field."""
-    coefficient = 2.0 * DIMENSION / (lambda0 * n0)
+    """<lap phi>_i = 2d/(lambda0 n0) sum_j (phi_j - phi_i) w_ij, for a scalar or N×k field."""
+    coefficient = 2.0 * pairs.dimension / (lambda0 * n0)
     difference = field[pairs.cols] - field[pairs.rows]
     if difference.ndim == 1:
         return coefficient * np.bincount(pairs.rows, weights=difference * w, minlength=n_rows)
@@ -93,8 +69,9 @@ def gradient(pairs, w, field, n_rows, n0, reference, include):
     rows = pairs.rows[mask]
     factor = (field[pairs.cols[mask]] - reference[rows]) * w[mask] / pairs.distance[mask] ** 2
     offset = pairs.offset[mask]
-    return (DIMENSION / n0) * np.column_stack([
-        np.bincount(rows, weights=factor * offset[:, k], minlength=n_rows) for k in range(2)])
+    return (pairs.dimension / n0) * np.column_stack([
+        np.bincount(rows, weights=factor * offset[:, k], minlength=n_rows)
+        for k in range(pairs.dimension)])
 
 
 def divergence(pairs, w, field, n_rows, n0):
@@ -103,5 +80,5 @@ def divergence(pairs, w, field, n_rows, n0):
     rows = pairs.rows[mask]
     difference = field[pairs.cols[mask]] - field[rows]
     projected = np.einsum("pk,pk->p", difference, pairs.offset[mask])
-    return (DIMENSION / n0) * np.bincount(rows, weights=projected * w[mask] /
+    return (pairs.dimension / n0) * np.bincount(rows, weights=projected * w[mask] /
                                           pairs.distance[mask] ** 2, minlength=n_rows)

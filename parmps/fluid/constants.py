@@ -2,7 +2,7 @@
 
 from dataclasses import dataclass
 
-from parmps.core import operators
+from parmps.core import lattice
 from parmps.core.settings import search_radius
 
 
@@ -33,13 +33,15 @@ class MPSConstants:
         mps = case["mps"]
         re_number_density = mps["re_number_density"] * spacing
         re_laplacian = mps["re_laplacian"] * spacing
-        n0, _ = operators.reference_values(spacing, re_number_density)
-        n0_laplacian, lambda0 = operators.reference_values(spacing, re_laplacian)
+        dimension = case.get("dimension", 2)
+        n0, _ = lattice.reference_values(spacing, re_number_density, dimension)
+        n0_laplacian, lambda0 = lattice.reference_values(spacing, re_laplacian, dimension)
         return cls(
-            dimension=case.get("dimension", 2), spacing=spacing,
+            dimension=dimension, spacing=spacing,
             re_number_density=re_number_density, re_laplacian=re_laplacian,
             search_radius=search_radius(case), n0=n0, n0_laplacian=n0_laplacian,
             lambda0=lambda0,
-            neighbour_count0=operators.neighbour_count_reference(spacing, re_number_density),
+            neighbour_count0=lattice.neighbour_count_reference(spacing, re_number_density,
+                                                               dimension),
             density=case["fluid"]["density"], viscosity=case["fluid"]["viscosity"])
 

@@ -71,8 +71,10 @@ class FluidSolver:
     ``gradient`` too, so the fluid and the bodies feel the same one.
     """
 
-    def __init__(self, case, comm, decomposition, pressure_solver=None):
+    def __init__(self, case, comm, decomposition, pressure_solver=None, dimension=2):
         self.comm = comm
+        # The number of components of positions: every case is 2D for now.
+        self.dimension = dimension
         self.decomposition = decomposition
         constants = MPSConstants.from_case(case)
         self.constants = constants
@@ -119,7 +121,7 @@ class FluidSolver:
         timers.start("operators")
         velocity_star = velocity.copy()
         position_star = position.copy()
-        acceleration = np.broadcast_to(self.gravity, (n, 2)).copy()
+        acceleration = np.broadcast_to(self.gravity, (n, c.dimension)).copy()
         if c.viscosity > 0.0:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(indptr, cols, position, velocity,
