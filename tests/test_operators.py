@@ -1,4 +1,4 @@
-"""MPS operators on a square lattice, where they are exact (DESIGN.md §1.1)."""
+"""MPS operators on a square lattice, where they are exact (docs/design.md §1.1)."""
 
 import numpy as np
 import pytest

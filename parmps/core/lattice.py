@@ -1,4 +1,4 @@
-"""Reference values of the full lattice in d dimensions (DESIGN.md §1.1).
+"""Reference values of the full lattice in d dimensions (docs/design.md §1.1).
 
 MPS normalises its operators by the values a particle has when it sits inside
 the undisturbed initial arrangement: the square (d = 2) or cubic (d = 3)

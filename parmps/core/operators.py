@@ -1,4 +1,4 @@
-"""MPS operators on a pair list (DESIGN.md §1.1), in d dimensions.
+"""MPS operators on a pair list (docs/design.md §1.1), in d dimensions.
 
 Each operator takes the pair rows ``i`` (grouped, owned particles), the pair
 columns ``j`` (owned or ghost), the pair geometry and per-particle arrays, and
@@ -63,7 +63,7 @@ def gradient(pairs, w, field, n_rows, n0, reference, include):
     """<grad phi>_i = d/n0 sum_j (phi_j - ref_i) r_ij w_ij / |r_ij|^2 over j with include[j].
 
     With ``reference`` the neighbourhood minimum this is the MPS pressure gradient
-    (DESIGN.md §1.1); with ``reference = phi_i`` the plain gradient.
+    (docs/design.md §1.4); with ``reference = phi_i`` the plain gradient.
     """
     mask = (w > 0.0) & include[pairs.cols]
     rows = pairs.rows[mask]
