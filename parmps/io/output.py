@@ -54,6 +54,10 @@ class Output:
         case.attrs["parmps_version"] = __version__
         case.attrs["ranks"] = comm.size
         self.frames = self.file.create_group("frames")
+        # 0, 1, 2, ... as long as the largest frame: the XDMF's vertex
+        # connectivity (ParaView's XDMF3 reader makes no cells without one).
+        self.vertex_index = self.file.create_dataset(
+            "vertex_index", shape=(0,), maxshape=(None,), chunks=(4096,), dtype=np.int64)
         diagnostics = self.file.create_group("diagnostics")
         self.diagnostic_names = DIAGNOSTICS + tuple(extra_diagnostics)
         self.diagnostics = {}
@@ -103,11 +107,17 @@ class Output:
                                            dtype=data.dtype)
             if count:
                 dataset[offset:offset + count] = data
+        capacity = len(self.vertex_index)
+        if total > capacity:
+            self.vertex_index.resize((total,))
+            if self.comm.rank == 0:
+                self.vertex_index[capacity:] = np.arange(capacity, total, dtype=np.int64)
         self.frame_list.append((step, time, total))
         self.flush_diagnostics()
         self.file.flush()
         if self.comm.rank == 0:
-            write_xdmf(self.xdmf_path, os.path.basename(self.path), self.frame_list)
+            write_xdmf(self.xdmf_path, os.path.basename(self.path), self.frame_list,
+                       len(self.vertex_index))
 
     def close(self, complete):
         self.flush_diagnostics()
@@ -115,8 +125,15 @@ class Output:
         self.file.close()
 
 
-def write_xdmf(path, h5_name, frames):
-    """An XDMF temporal collection of point clouds that ParaView opens directly."""
+def write_xdmf(path, h5_name, frames, n_vertex_index):
+    """An XDMF temporal collection of point clouds that ParaView opens directly.
+
+    Each particle is one Polyvertex cell, so ParaView's default Surface view
+    draws them. The connectivity is the first ``total`` entries of the
+    ``/vertex_index`` dataset (``n_vertex_index`` long), cut by a HyperSlab: the
+    XDMF3 reader makes no cells from a Polyvertex without connectivity, and the
+    legacy XDMF reader crashes on an HDF item shorter than its dataset.
+    """
     grids = []
     for step, time, total in frames:
         base = f"{h5_name}:/frames/{step:08d}"
@@ -125,9 +142,18 @@ def write_xdmf(path, h5_name, frames):
             return (f'<DataItem Dimensions="{dims}" NumberType="{number}" '
                     f'Precision="{precision}" Format="HDF">{base}/{name}</DataItem>')
 
+        if total:
+            topology = f"""<Topology TopologyType="Polyvertex" NumberOfElements="{total}" NodesPerElement="1">
+          <DataItem ItemType="HyperSlab" Dimensions="{total}" Type="HyperSlab">
+            <DataItem Dimensions="3 1" NumberType="Int" Format="XML">0 1 {total}</DataItem>
+            <DataItem Dimensions="{n_vertex_index}" NumberType="Int" Precision="8" Format="HDF">{h5_name}:/vertex_index</DataItem>
+          </DataItem>
+        </Topology>"""
+        else:
+            topology = '<Topology TopologyType="Polyvertex" NumberOfElements="0" NodesPerElement="1"/>'
         grids.append(f"""      <Grid Name="step {step}" GridType="Uniform">
         <Time Value="{time:.10g}"/>
-        <Topology TopologyType="Polyvertex" NumberOfElements="{total}" NodesPerElement="1"/>
+        {topology}
         <Geometry GeometryType="XY">{item("position", f"{total} 2")}</Geometry>
         <Attribute Name="pressure" AttributeType="Scalar" Center="Node">{item("pressure", total)}</Attribute>
         <Attribute Name="velocity" AttributeType="Vector" Center="Node">{item("velocity", f"{total} 2")}</Attribute>
