@@ -12,9 +12,10 @@ only). It prints, for each block at that time, its numbers of points and cells
 and its cell types: the particles should have one cell per point.
 
 It needs ParaView with its Python modules (Debian: ``apt-get install paraview
-python3-paraview``) and, without a display, ``xvfb xauth``. Started by any
-other Python, it runs itself again under ``xvfb-run -a pvbatch`` (ParaView's
-start-up takes seconds, hence several results in one run).
+python3-paraview``) and, without a display, ``xvfb``. Started by any other
+Python, it runs itself again under pvbatch, with an Xvfb of its own when there
+is no display (ParaView's start-up takes seconds, hence several results in one
+run).
 
 ``--summary FILE`` writes, for each result, the same counts at the first and
 the last time step with each block's point arrays, as a JSON list
@@ -25,9 +26,10 @@ import argparse
 import json
 import os
 import shutil
+import subprocess
 import sys
 
-INSTALL = "apt-get install paraview python3-paraview xvfb xauth"
+INSTALL = "apt-get install paraview python3-paraview xvfb"
 # Set when the script restarts itself under pvbatch, so that a pvbatch which
 # cannot import paraview reports it instead of restarting again.
 RELAUNCHED = "PARMPS_RENDER_PARAVIEW_RELAUNCHED"
@@ -41,30 +43,66 @@ def in_pvbatch():
     return vtkProcessModule.GetProcessType() == vtkProcessModule.PROCESS_BATCH
 
 
+def start_xvfb():
+    """An X server for pvbatch on a free display it picks and reports itself: (Xvfb, ":N")."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        sys.exit(f"render_paraview: no display and no Xvfb; install: {INSTALL}")
+    read, write = os.pipe()
+    server = subprocess.Popen([xvfb, "-displayfd", str(write), "-screen", "0", "1280x1024x24",
+                               "-nolisten", "tcp"], pass_fds=(write,),
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as pipe:
+        number = pipe.readline().strip()
+    if not number:
+        server.wait()
+        sys.exit("render_paraview: Xvfb did not start")
+    return server, f":{number}"
+
+
 def relaunch():
+    """Run this script again under pvbatch, with an Xvfb of its own when there is no display."""
     if os.environ.get(RELAUNCHED):
         sys.exit(f"render_paraview: pvbatch cannot import paraview; install: {INSTALL}")
     pvbatch = shutil.which("pvbatch")
     if pvbatch is None:
         sys.exit(f"render_paraview: no pvbatch; install: {INSTALL}")
+    environment = dict(os.environ, **{RELAUNCHED: "1"})
+    server = None
+    if not environment.get("DISPLAY"):
+        server, environment["DISPLAY"] = start_xvfb()
     command = [pvbatch, os.path.abspath(__file__)] + sys.argv[1:]
-    if not os.environ.get("DISPLAY"):
-        xvfb_run = shutil.which("xvfb-run")
-        if xvfb_run is None:
-            sys.exit(f"render_paraview: no display and no xvfb-run; install: {INSTALL}")
-        command = [xvfb_run, "-a"] + command
-    os.environ[RELAUNCHED] = "1"
-    os.execv(command[0], command)
+    try:
+        # A pvbatch started alongside others sometimes finds the X server
+        # refusing its connection and aborts ("bad X server connection", seen
+        # with Debian 12's Xvfb, shared or not); started again it connects.
+        for attempts_left in (2, 1, 0):
+            completed = subprocess.run(command, env=environment, stderr=subprocess.PIPE,
+                                       text=True)
+            if (completed.returncode == 0 or not attempts_left
+                    or "bad X server connection" not in completed.stderr):
+                sys.stderr.write(completed.stderr)
+                break
+            print("render_paraview: pvbatch could not connect to the X server; "
+                  "starting it again", file=sys.stderr)
+        status = completed.returncode
+    finally:
+        if server is not None:
+            server.terminate()
+            server.wait()
+    sys.exit(status)
 
 
 def arguments():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("results", nargs="+", help="output directories or their .xdmf files")
     parser.add_argument("-o", "--output",
-                        help="PNG to write, for one result (default: paraview.png beside the .xdmf)")
+                        help="PNG to write, for one result (default: paraview.png by the .xdmf)")
     parser.add_argument("--time", type=float, help="time to show (default: the last time step)")
     parser.add_argument("--size", type=int, nargs=2, default=(800, 600), metavar=("W", "H"))
-    parser.add_argument("--summary", help="write the counts at the first and last time step as JSON")
+    parser.add_argument("--summary",
+                        help="write the counts at the first and last time step as JSON")
     args = parser.parse_args()
     if args.output and len(args.results) > 1:
         parser.error("-o names the picture of a single result")
@@ -150,8 +188,8 @@ def render(xdmf, picture, time, size):
 def main(args):
     summaries = []
     for xdmf in args.xdmf:
-        picture = os.path.abspath(args.output or os.path.join(os.path.dirname(xdmf), "paraview.png"))
-        summaries.append(render(xdmf, picture, args.time, args.size))
+        picture = args.output or os.path.join(os.path.dirname(xdmf), "paraview.png")
+        summaries.append(render(xdmf, os.path.abspath(picture), args.time, args.size))
     if args.summary:
         with open(args.summary, "w") as handle:
             json.dump(summaries, handle, indent=1)
