@@ -95,10 +95,18 @@ def test_output_layout_and_xdmf(hydrostatic_run):
     assert len(grids) == len(frames)
     with h5py.File(out / "result.h5", "r") as handle:
         for item in root.iter("DataItem"):
+            if item.get("Format") != "HDF":
+                continue
             file_name, dataset = item.text.split(":")
             assert file_name == "result.h5"
             dims = tuple(int(d) for d in item.get("Dimensions").split())
             assert handle[dataset].shape == dims
+        # Each particle is a vertex cell: the first N entries of /vertex_index.
+        np.testing.assert_array_equal(handle["vertex_index"][()], np.arange(752))
+        for grid in grids:
+            (slab,) = grid.find("Topology")
+            assert slab.get("ItemType") == "HyperSlab" and slab.get("Dimensions") == "752"
+            assert slab[0].text.split() == ["0", "1", "752"]
 
 
 def test_petsc_options_reach_the_solver_and_divergence_exits_1(tmp_path):

@@ -1,7 +1,8 @@
 """Particle frames in result.h5, each one array sorted by global id whatever the rank count.
 
 ``/frames/<step, 8 digits>`` holds ``FRAME_FIELDS`` of every particle and the
-attributes ``time``, ``step`` and ``dt``; with bodies, ``/frames/<step>/solids/
+attributes ``time``, ``step`` and ``dt``; ``/vertex_index`` is 0, 1, 2, ... as
+long as the largest frame, the particles' vertex connectivity in the XDMF; with bodies, ``/frames/<step>/solids/
 <body>/position`` and ``velocity`` hold every node (anchors included) in the
 body's own order, and ``/solids/<body>/springs`` the mesh once.
 """
@@ -25,6 +26,10 @@ class FrameWriter:
         self.dimension = dimension
         self.solids = solids
         self.frames = result.file.create_group("frames")
+        # 0, 1, 2, ... as long as the largest frame: the XDMF's vertex connectivity
+        # (ParaView's XDMF3 reader makes no cells from a Polyvertex without one).
+        self.vertex_index = result.file.create_dataset(
+            "vertex_index", shape=(0,), maxshape=(None,), chunks=(4096,), dtype=np.int64)
         self.frame_list = []  # (step, time, total particles)
         self.bodies = []
         if solids is not None:
@@ -68,6 +73,11 @@ class FrameWriter:
                     dataset = sub.create_dataset(key, shape=data.shape, dtype=np.float64)
                     if self.comm.rank == 0:
                         dataset[...] = data
+        capacity = len(self.vertex_index)
+        if total > capacity:
+            self.vertex_index.resize((total,))
+            if self.comm.rank == 0:
+                self.vertex_index[capacity:] = np.arange(capacity, total, dtype=np.int64)
         self.frame_list.append((step, time, total))
 
     def publish(self):
@@ -75,7 +85,7 @@ class FrameWriter:
         self.result.file.flush()
         if self.comm.rank == 0:
             write_xdmf(self.result.xdmf_path, os.path.basename(self.result.path),
-                       self.frame_list, self.dimension, self.bodies)
+                       self.frame_list, len(self.vertex_index), self.dimension, self.bodies)
 
 
 def read_frame(path, step=None):

@@ -12,17 +12,31 @@ import os
 GEOMETRY_TYPES = {2: "XY", 3: "XYZ"}
 
 
-def _particle_grid(h5_name, step, time, total, dimension):
+def _particle_grid(h5_name, step, time, total, n_vertex_index, dimension):
+    """One frame's particles. Each particle is one Polyvertex cell, so ParaView's default
+    Surface view draws them: the connectivity is the first ``total`` entries of
+    ``/vertex_index`` (``n_vertex_index`` long), cut by a HyperSlab. The XDMF3 reader
+    makes no cells from a Polyvertex without connectivity, and the legacy XDMF reader
+    crashes on an HDF item shorter than its dataset."""
     base = f"{h5_name}:/frames/{step:08d}"
 
     def item(name, dims, number="Float", precision=8):
         return (f'<DataItem Dimensions="{dims}" NumberType="{number}" '
                 f'Precision="{precision}" Format="HDF">{base}/{name}</DataItem>')
 
+    if total:
+        topology = f"""<Topology TopologyType="Polyvertex" NumberOfElements="{total}" NodesPerElement="1">
+          <DataItem ItemType="HyperSlab" Dimensions="{total}" Type="HyperSlab">
+            <DataItem Dimensions="3 1" NumberType="Int" Format="XML">0 1 {total}</DataItem>
+            <DataItem Dimensions="{n_vertex_index}" NumberType="Int" Precision="8" Format="HDF">{h5_name}:/vertex_index</DataItem>
+          </DataItem>
+        </Topology>"""
+    else:
+        topology = '<Topology TopologyType="Polyvertex" NumberOfElements="0" NodesPerElement="1"/>'
     d = dimension
     return f"""      <Grid Name="step {step}" GridType="Uniform">
         <Time Value="{time:.10g}"/>
-        <Topology TopologyType="Polyvertex" NumberOfElements="{total}" NodesPerElement="1"/>
+        {topology}
         <Geometry GeometryType="{GEOMETRY_TYPES[d]}">{item("position", f"{total} {d}")}</Geometry>
         <Attribute Name="pressure" AttributeType="Scalar" Center="Node">{item("pressure", total)}</Attribute>
         <Attribute Name="velocity" AttributeType="Vector" Center="Node">{item("velocity", f"{total} {d}")}</Attribute>
@@ -64,9 +78,10 @@ def _spring_collection(h5_name, frames, bodies, dimension):
 """)
 
 
-def write_xdmf(path, h5_name, frames, dimension=2, bodies=()):
-    """Write the sidecar for ``frames`` ((step, time, particle count) each) and ``bodies``."""
-    grids = [_particle_grid(h5_name, step, time, total, dimension)
+def write_xdmf(path, h5_name, frames, n_vertex_index, dimension=2, bodies=()):
+    """Write the sidecar for ``frames`` ((step, time, particle count) each) and ``bodies``;
+    ``n_vertex_index``: the length of ``/vertex_index``."""
+    grids = [_particle_grid(h5_name, step, time, total, n_vertex_index, dimension)
              for step, time, total in frames]
     text = ("""<?xml version="1.0" ?>
 <!DOCTYPE Xdmf SYSTEM "Xdmf.dtd" []>
