@@ -8,7 +8,8 @@ coordinate by a uniform random amount in [-JITTER, JITTER] l0.
 import numpy as np
 import pytest
 
-from parmps.core import kernels, lattice, operators
+from parmps.core import kernels, operators
+from parmps.core.lattice import reference_values
 from parmps.core.neighbours import pair_list, rows_of
 from parmps.fluid.schemes import khayyer_gotoh, kondo_koshizuka
 
@@ -52,7 +53,7 @@ def test_lattice_sums_match_hand_values_and_operators():
     assert inverse == pytest.approx(hand_inverse, rel=1e-12)
     for factor in (2.1, 2.3, 3.1):
         n0, _, _, _ = khayyer_gotoh.lattice_sums(SPACING, factor * SPACING)
-        assert n0 == pytest.approx(lattice.reference_values(SPACING, factor * SPACING, 2)[0],
+        assert n0 == pytest.approx(reference_values(SPACING, factor * SPACING, 2)[0],
                                    rel=1e-12)
 
 
@@ -241,7 +242,7 @@ def test_hs_with_the_standard_laplacian_overcorrects_by_the_lattice_factor():
                                                         np.ones(n, bool), radius, n)
     rate = khayyer_gotoh.number_density_rate(indptr, cols, position, gradient, radius, n)
     pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
-    n0_laplacian, lambda0 = lattice.reference_values(SPACING, laplacian_radius, 2)
+    n0_laplacian, lambda0 = reference_values(SPACING, laplacian_radius, 2)
     standard = operators.laplacian(pairs, pairs.weight(laplacian_radius), pressure, n,
                                    n0_laplacian, lambda0)
     inside = interior(position, 6 * SPACING)
@@ -362,7 +363,7 @@ def test_parmps_gradient_correction_is_the_papers():
     position = lattice(0.1, seed=9, side=16)
     n = len(position)
     radius = 2.1 * SPACING
-    n0 = lattice.reference_values(SPACING, radius, 2)[0]
+    n0 = reference_values(SPACING, radius, 2)[0]
     has_pressure = position[:, 1] > 1.5 * SPACING
     pressure = 1000.0 * (0.2 - position[:, 1]) + 50 * np.sin(30 * position[:, 0])
     indptr, cols = pair_list(position, radius)
