@@ -251,8 +251,9 @@ def _run(args, petsc_options, comm):
     path = run.execute()
     log.info("output: %s and %s", path, os.path.join(directory, "result.xdmf"))
     if run.state.outcome == "interrupted":
-        log.warning("interrupted: the checkpoint is in %s; continue the run with\n  %s\n"
+        if comm.rank == 0:
+            log.warning("interrupted: the checkpoint is in %s; continue the run with\n  %s\n"
                     "or  scripts/run -n %d --restart %s", directory,
-                    continue_command(comm.size, directory), comm.size, directory)
+                        continue_command(comm.size, directory), comm.size, directory)
         return INTERRUPTED
     return 0
