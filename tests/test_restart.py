@@ -6,6 +6,7 @@ rtol 1e-12), with every frame once and the series rows once.
 """
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -103,6 +104,21 @@ def test_solid_only_restart_and_refusals(tmp_path):
     assert a["step"] == b["step"] == 300
     assert np.abs(a["position"] - b["position"]).max() < 1e-12
     assert len(read_frames(split / "result.h5")) == len(read_frames(whole / "result.h5"))
+
+    # A run that crashed after its checkpoint left frames and rows behind it: the
+    # continued run drops them and writes them again, once.
+    shutil.copy(split / "checkpoint.h5", tmp_path / "early.h5")
+    result = run_parmps(["--restart", split, "--end-time", "0.45"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    shutil.copy(tmp_path / "early.h5", split / "checkpoint.h5")
+    result = run_parmps(["--restart", split, "--end-time", "0.3"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    frames = read_frames(split / "result.h5")
+    assert [f["step"] for f in frames] == [f["step"] for f in read_frames(whole / "result.h5")]
+    assert np.abs(frames[-1]["position"] - a["position"]).max() < 1e-12
+    steps, _, complete = _series_steps(split / "result.h5")
+    assert complete
+    np.testing.assert_array_equal(steps, np.arange(1, 301))
 
     for args, words in (
             (["--restart", split, CASES / "box_in_flow.toml"], "differs from the case"),
