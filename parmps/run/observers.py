@@ -16,7 +16,6 @@ before ``start``).
 import logging
 
 import numpy as np
-from mpi4py import MPI
 
 from parmps.io.series import Series
 from parmps.run.schedule import SimulatedInterval, WallInterval
@@ -193,6 +192,8 @@ class Checkpoints(Observer):
     """
 
     def __init__(self, comm, write, seconds, interruption):
+        from mpi4py import MPI
+        self.mpi = MPI
         self.comm = comm
         self.write = write
         self.cadence = WallInterval(seconds) if seconds > 0 else None
@@ -202,7 +203,7 @@ class Checkpoints(Observer):
     def observe(self, state):
         self.flags[0] = bool(self.interruption.requested)
         self.flags[1] = self.comm.rank == 0 and self.cadence is not None and self.cadence.due()
-        self.comm.Allreduce(MPI.IN_PLACE, self.flags, op=MPI.MAX)
+        self.comm.Allreduce(self.mpi.IN_PLACE, self.flags, op=self.mpi.MAX)
         if self.flags[0]:
             state.stop = "interrupted"
             if self.comm.rank == 0:
