@@ -23,7 +23,6 @@ import numpy as np
 from parmps import __version__
 from parmps.core.particles import FIELDS, Particles
 from parmps.io.result import open_file
-from parmps.parallel.slabs import by_id_blocks
 
 CHECKPOINT = "checkpoint.h5"
 
@@ -37,6 +36,8 @@ def write_checkpoint(comm, directory, case_text, particles, tree):
 
     Returns the size of the file in bytes.
     """
+    # Here, not at the top: reading a checkpoint back must not start MPI.
+    from parmps.parallel.slabs import by_id_blocks
     path = checkpoint_path(directory)
     temporary = path + ".tmp"
     owned, offset, total = by_id_blocks(particles, comm)
