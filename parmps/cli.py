@@ -13,6 +13,7 @@ import json
 import logging
 import os
 import re
+import shlex
 import sys
 import traceback
 
@@ -212,8 +213,11 @@ def prepare_restart(args):
     return case, text
 
 
-def continue_command(ranks, directory):
-    return f"mpirun -n {ranks} python -m parmps --restart {directory}"
+def continue_command(ranks, directory, petsc_options=()):
+    """The command that continues the run in ``directory``, with the same solver options
+    (they are not part of the case)."""
+    options = "".join(f" {shlex.quote(option)}" for option in petsc_options)
+    return f"mpirun -n {ranks} python -m parmps --restart {shlex.quote(directory)}{options}"
 
 
 def _run(args, petsc_options, comm):
@@ -252,8 +256,10 @@ def _run(args, petsc_options, comm):
     log.info("output: %s and %s", path, os.path.join(directory, "result.xdmf"))
     if run.state.outcome == "interrupted":
         if comm.rank == 0:
+            command = continue_command(comm.size, directory, petsc_options)
             log.warning("interrupted: the checkpoint is in %s; continue the run with\n  %s\n"
-                    "or  scripts/run -n %d --restart %s", directory,
-                        continue_command(comm.size, directory), comm.size, directory)
+                        "or  %s", directory, command,
+                        command.replace(f"mpirun -n {comm.size} python -m parmps",
+                                        f"scripts/run -n {comm.size}"))
         return INTERRUPTED
     return 0
