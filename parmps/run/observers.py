@@ -144,9 +144,11 @@ class Frames(Observer):
         self.resumed = True
 
     def start(self, state):
+        if not self.write_particles:
+            return
         if self.resumed:
             self.writer.publish()  # the sidecar names the frames the file holds
-        elif self.write_particles:
+        else:
             self.writer.write(0, 0.0, 0.0, state.particles)
             self.writer.publish()
 
