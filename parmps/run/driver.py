@@ -72,6 +72,8 @@ def advance(comm, state, stepper, observers, end, time_settings):
                              "wall_seconds": state.elapsed, **stepper.diagnostics(state)}
         for observer in observers:
             observer.observe(state)
+    if state.stop is not None and not end.running(state.time, state.step):
+        state.stop = None  # stopped after the last step: the run is complete all the same
     state.elapsed = before + watch.elapsed()
     return state
 
