@@ -1,7 +1,9 @@
 """Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--set S.K=V ...]
-[--check] [--debug] [PETSc options]`` (docs/design.md §2.3, §5).
+[--check] [--debug] [PETSc options]``, or ``python -m parmps --restart OUTDIR [CASE.toml]
+[--end-time T]`` to continue a run from its checkpoint (docs/design.md §2.3, §5).
 
-Exit status 0 done, 2 bad input (one line on stderr), 1 a run that failed.
+Exit status 0 done, 2 bad input (one line on stderr), 1 a run that failed, 3 a run
+interrupted by a signal (its checkpoint written: ``--restart`` continues it).
 The case is read and validated on rank 0 and the verdict broadcast, so every
 rank stops together; an unexpected exception on any rank aborts the whole job.
 """
@@ -11,10 +13,11 @@ import json
 import logging
 import os
 import re
+import shlex
 import sys
 import traceback
 
-from parmps.errors import CaseError, RunFailure
+from parmps.errors import INTERRUPTED, CaseError, RunFailure
 
 log = logging.getLogger("parmps")
 
@@ -58,7 +61,11 @@ def build_parser():
     parser = _Parser(prog="parmps", description="Parallel MPS fluid / mass-spring solid solver. "
                      "PETSc options such as -pressure_ksp_rtol 1e-10 pass through to the "
                      "pressure solver.")
-    parser.add_argument("case", help="the case file (TOML)")
+    parser.add_argument("case", nargs="?",
+                        help="the case file (TOML); optional with --restart")
+    parser.add_argument("--restart", metavar="OUTDIR",
+                        help="continue the run whose output is in OUTDIR from its last "
+                             "checkpoint, on any rank count (--end-time may extend it)")
     parser.add_argument("-o", "--output", metavar="OUTDIR",
                         help="output directory (default out/<case file stem>/)")
     parser.add_argument("--end-time", type=float, metavar="T", help="override time.end")
@@ -168,11 +175,67 @@ def main(argv=None):
         return 1
 
 
+def prepare_restart(args):
+    """Check that ``--restart OUTDIR`` can continue a run; returns (case, case_text) from its
+    checkpoint (with ``--end-time`` applied). Raises CaseError."""
+    from parmps import config, schema
+    from parmps.io.checkpoint import has_checkpoint, read_case_text
+    from parmps.tools import toml
+    directory = args.restart
+    if args.output is not None and os.path.abspath(args.output) != os.path.abspath(directory):
+        raise CaseError(f"--restart {directory} writes into {directory}: -o {args.output} "
+                        f"cannot go with it")
+    if args.set:
+        raise CaseError("--restart continues a run with its own case: --set cannot change it")
+    if not has_checkpoint(directory):
+        raise CaseError(f"--restart {directory}: no checkpoint.h5 there, nothing to continue")
+    if not os.path.isfile(os.path.join(directory, "result.h5")):
+        raise CaseError(f"--restart {directory}: its checkpoint has no result.h5 beside it")
+    text = read_case_text(directory)
+    raw = config.load_text(text, f"{directory}/checkpoint.h5")
+    if args.case is not None:
+        given, _ = prepare_case(argparse.Namespace(case=args.case, set=None, end_time=None))
+        # The end time is what --end-time may change; anything else is another run.
+        ours = schema.validate(config.load_text(text, "checkpoint"))
+        for case in (given, ours):
+            case["time"].pop("end")
+        if given != ours:
+            raise CaseError(f"{args.case} differs from the case of the run in {directory}: "
+                            f"--restart continues that run with its own case (leave the case "
+                            f"file out, or start a new run with -o)")
+    if args.end_time is not None:
+        raw.setdefault("time", {})["end"] = args.end_time
+        text = toml.dumps(raw)
+    try:
+        case = schema.validate(raw)
+    except CaseError as exc:
+        raise CaseError(f"{directory}/checkpoint.h5: {exc}") from None
+    return case, text
+
+
+def continue_command(ranks, directory, petsc_options=()):
+    """The command that continues the run in ``directory``, with the same solver options
+    (they are not part of the case)."""
+    options = "".join(f" {shlex.quote(option)}" for option in petsc_options)
+    return f"mpirun -n {ranks} python -m parmps --restart {shlex.quote(directory)}{options}"
+
+
 def _run(args, petsc_options, comm):
-    case, case_text = _verdict(comm, lambda: prepare_case(args))
+    checkpoint = None
+    if args.restart is not None:
+        case, case_text = _verdict(comm, lambda: prepare_restart(args))
+        directory = args.restart
+        from parmps.io.checkpoint import read_checkpoint
+        checkpoint = read_checkpoint(directory)
+        name = f"{directory} (continued)"
+    else:
+        if args.case is None:
+            raise CaseError("command line: a case file is needed (or --restart OUTDIR)")
+        case, case_text = _verdict(comm, lambda: prepare_case(args))
+        stem = os.path.splitext(os.path.basename(args.case))[0]
+        directory = args.output or os.path.join("out", stem)
+        name = args.case
     from parmps.run.simulation import Simulation
-    stem = os.path.splitext(os.path.basename(args.case))[0]
-    directory = args.output or os.path.join("out", stem)
     solver_options = {}
     if not args.check and petsc_options:
         from parmps.fluid.ppe import initialise
@@ -180,14 +243,23 @@ def _run(args, petsc_options, comm):
     if not args.check:
         _verdict(comm, lambda: prepare_output(directory))
     # Geometry is checked while building the scene, on every rank alike.
-    run = Simulation(case, case_text, comm, directory, solver_options=solver_options)
+    run = Simulation(case, case_text, comm, directory, solver_options=solver_options,
+                     checkpoint=checkpoint)
     if args.check:
         summary = run.summary()
         if comm.rank == 0:
             print(json.dumps(summary, indent=2))
         return 0
-    log.info("case %s: %s particles on %d rank(s), output in %s", args.case,
+    log.info("case %s: %s particles on %d rank(s), output in %s", name,
              ", ".join(f"{v} {k}" for k, v in run.counts.items()), comm.size, directory)
     path = run.execute()
     log.info("output: %s and %s", path, os.path.join(directory, "result.xdmf"))
+    if run.state.outcome == "interrupted":
+        if comm.rank == 0:
+            command = continue_command(comm.size, directory, petsc_options)
+            log.warning("interrupted: the checkpoint is in %s; continue the run with\n  %s\n"
+                        "or  %s", directory, command,
+                        command.replace(f"mpirun -n {comm.size} python -m parmps",
+                                        f"scripts/run -n {comm.size}"))
+        return INTERRUPTED
     return 0

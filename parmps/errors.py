@@ -1,4 +1,7 @@
-"""The two ways a run ends badly, each with its exit status (docs/design.md §2.3)."""
+"""The ways a run ends early, each with its exit status (docs/design.md §2.3)."""
+
+# A run stopped by a signal after writing its checkpoint: --restart continues it.
+INTERRUPTED = 3
 
 
 class CaseError(Exception):

@@ -168,6 +168,18 @@ class OpenBoundaries(Participant):
         self.inflow_total = 0
         self.outflow_total = 0
 
+    name = "open_boundaries"
+
+    def checkpoint_state(self):
+        return {"created": np.array([inlet.created for inlet in self.inlets], np.int64),
+                "inflow_total": self.inflow_total, "outflow_total": self.outflow_total}
+
+    def restore_state(self, saved):
+        for inlet, created in zip(self.inlets, np.atleast_1d(saved["created"])):
+            inlet.created = int(created)
+        self.inflow_total = int(saved["inflow_total"])
+        self.outflow_total = int(saved["outflow_total"])
+
     def initial_particles(self, scene_count):
         """The buffers' particles at t = 0, to add after the scene's ``scene_count``
         particles (inlet j's ids start at scene_count + j * 2**40)."""

@@ -100,6 +100,19 @@ class WeakCoupling(Participant):
         self.owners = [k % comm.size for k in range(len(model.bodies))]
         self.last_substeps = {body.name: 0 for body in model.bodies}
 
+    name = "coupling"
+
+    def checkpoint_state(self):
+        """Every body's state from its owner: only the owner advances it, so only its
+        accelerations and multipliers are current (collective)."""
+        state = self.model.state()
+        return {"bodies": {body.name: self.comm.bcast(state[body.name], root=self.owners[k])
+                           for k, body in enumerate(self.model.bodies)}}
+
+    def restore_state(self, saved):
+        # Every rank: the owners differ with the rank count.
+        self.model.restore(saved["bodies"])
+
     def speed(self, time, until):
         """Largest node speed of any body (the same on every rank)."""
         return self.model.max_speed()

@@ -21,11 +21,23 @@ over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
 and ``diagnostics()`` add columns to the run's diagnostics;
 ``particle_owner(pid)`` names the geometry a particle belongs to and what to
 do about it, for messages: ``(description, advice)`` or None.
+
+A participant with state beyond the particles (counters, bodies) has a ``name``
+and contributes it to checkpoints: ``checkpoint_state()`` (collective; a dict
+of arrays and scalars, the same on every rank) and ``restore_state(saved)``
+(a continued run, before its first step).
 """
 
 
 class Participant:
     DIAGNOSTICS = {}  # column name -> numpy dtype
+    name = None  # the group of its checkpoint state; None: it has none
+
+    def checkpoint_state(self):
+        return {}
+
+    def restore_state(self, saved):
+        pass
 
     def before_exchange(self, particles, time, dt):
         pass

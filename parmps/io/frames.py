@@ -25,23 +25,31 @@ class FrameWriter:
         self.comm = result.comm
         self.dimension = dimension
         self.solids = solids
-        self.frames = result.file.create_group("frames")
+        self.frames = result.file.require_group("frames")
         # 0, 1, 2, ... as long as the largest frame: the XDMF's vertex connectivity
         # (ParaView's XDMF3 reader makes no cells from a Polyvertex without one).
-        self.vertex_index = result.file.create_dataset(
-            "vertex_index", shape=(0,), maxshape=(None,), chunks=(4096,), dtype=np.int64)
-        self.frame_list = []  # (step, time, total particles)
+        # A continued run finds it, and its frames, in the file.
+        if "vertex_index" in result.file:
+            self.vertex_index = result.file["vertex_index"]
+        else:
+            self.vertex_index = result.file.create_dataset(
+                "vertex_index", shape=(0,), maxshape=(None,), chunks=(4096,), dtype=np.int64)
+        # (step, time, total particles)
+        self.frame_list = [(int(group.attrs["step"]), float(group.attrs["time"]),
+                            len(group["id"])) for _, group in sorted(self.frames.items())]
         self.bodies = []
         if solids is not None:
             root = result.file.require_group("solids")
             for k, body in enumerate(solids.bodies):
                 group = root.require_group(body.name)
                 springs = solids.springs(k)
-                dataset = group.create_dataset("springs", shape=springs.shape, dtype=np.int64)
-                for key, value in solids.attributes(k).items():
-                    group.attrs[key] = value
-                if self.comm.rank == 0:
-                    dataset[...] = springs
+                if "springs" not in group:
+                    dataset = group.create_dataset("springs", shape=springs.shape,
+                                                   dtype=np.int64)
+                    for key, value in solids.attributes(k).items():
+                        group.attrs[key] = value
+                    if self.comm.rank == 0:
+                        dataset[...] = springs
                 self.bodies.append((body.name, len(body.position), len(springs)))
 
     def write(self, step, time, dt, particles):
@@ -79,6 +87,14 @@ class FrameWriter:
             if self.comm.rank == 0:
                 self.vertex_index[capacity:] = np.arange(capacity, total, dtype=np.int64)
         self.frame_list.append((step, time, total))
+
+    def drop_after(self, step):
+        """Delete the frames after ``step`` (collective): those an interrupted run wrote
+        after its checkpoint, which the continued run writes again."""
+        for name in sorted(self.frames):
+            if int(self.frames[name].attrs["step"]) > step:
+                del self.frames[name]
+        self.frame_list = [item for item in self.frame_list if item[0] <= step]
 
     def publish(self):
         """Flush the file and rewrite the XDMF so readers see every frame written so far."""

@@ -33,13 +33,18 @@ def open_file(path, comm, mode="w"):
 class ResultFile:
     """``directory/result.h5`` and the name of its XDMF sidecar."""
 
-    def __init__(self, comm, directory, case_text):
+    def __init__(self, comm, directory, case_text, resume=False):
+        """``resume``: open the file of a run being continued ("r+") instead of creating it;
+        its case and groups stay, observers resume their own."""
         self.comm = comm
         self.directory = directory
         self.path = os.path.join(directory, "result.h5")
         self.xdmf_path = os.path.join(directory, "result.xdmf")
-        self.file = open_file(self.path, comm)
+        self.file = open_file(self.path, comm, "r+" if resume else "w")
         self.file.attrs["complete"] = False
+        if resume:
+            self.file["case"].attrs["ranks"] = comm.size
+            return
         case = self.file.create_group("case")
         case.attrs["toml"] = case_text
         case.attrs["parmps_version"] = __version__

@@ -16,6 +16,9 @@ class Series:
         self.columns = dict(columns)
         self.datasets = {}
         for name, (dtype, shape) in self.columns.items():
+            if name in group:  # a continued run (see truncate)
+                self.datasets[name] = group[name]
+                continue
             self.datasets[name] = group.create_dataset(
                 name, shape=(0,) + shape, maxshape=(None,) + shape, chunks=(1024,) + shape,
                 dtype=dtype)
@@ -26,6 +29,14 @@ class Series:
         """Queue one row; a column without a value gets NaN."""
         for name in self.columns:
             self.pending[name].append(values.get(name, np.nan))
+
+    def truncate(self, rows):
+        """Keep the first ``rows`` rows (collective): a continued run drops the rows an
+        interrupted run wrote after its checkpoint before appending its own."""
+        for name, dataset in self.datasets.items():
+            dataset.resize((rows,) + dataset.shape[1:])
+            self.pending[name] = []
+        self.rows = rows
 
     def flush(self, rank):
         count = len(next(iter(self.pending.values()))) if self.pending else 0

@@ -27,7 +27,23 @@ class RunState:
     particles: Particles = field(default_factory=Particles.empty)
     diagnostics: dict = field(default_factory=dict)  # the last step's row
     particle_steps: int = 0
-    elapsed: float = 0.0  # wall seconds in the loop so far
+    elapsed: float = 0.0  # wall seconds in the loop so far (over every restart)
+    # Set by an observer, the same on every rank, to end the run after this step
+    # (an interruption: "interrupted").
+    stop: str = None
+    # How the loop ended, for the observers' finish: "complete", "interrupted" or "failed".
+    outcome: str = None
+
+    def checkpoint_state(self):
+        return {"time": self.time, "step": self.step, "dt": self.dt,
+                "particle_steps": self.particle_steps, "elapsed": self.elapsed}
+
+    def restore_state(self, saved):
+        self.time = float(saved["time"])
+        self.step = int(saved["step"])
+        self.dt = float(saved["dt"])
+        self.particle_steps = int(saved["particle_steps"])
+        self.elapsed = float(saved["elapsed"])
 
 
 DRIVER_DIAGNOSTICS = {"step": "int64", "time": "float64", "dt": "float64",
@@ -37,11 +53,12 @@ DRIVER_DIAGNOSTICS = {"step": "int64", "time": "float64", "dt": "float64",
 def advance(comm, state, stepper, observers, end, time_settings):
     """Step ``state`` until ``end`` says stop; observers see every step. Returns the state."""
     watch = Stopwatch()
+    before = state.elapsed  # a restarted run's wall time so far
     total_particles = comm.allreduce(state.particles.n_owned)
     stepper.start(state)
     for observer in observers:
         observer.start(state)
-    while end.running(state.time, state.step):
+    while state.stop is None and end.running(state.time, state.step):
         dt = end.clip(state.time, choose_dt(time_settings, stepper.dt_limits(state),
                                             state.step + 1))
         stepper.advance(state, dt)
@@ -50,33 +67,37 @@ def advance(comm, state, stepper, observers, end, time_settings):
         state.dt = dt
         stepper.check(state)
         state.particle_steps += total_particles
-        state.elapsed = watch.elapsed()
+        state.elapsed = before + watch.elapsed()
         state.diagnostics = {"step": state.step, "time": state.time, "dt": dt,
                              "wall_seconds": state.elapsed, **stepper.diagnostics(state)}
         for observer in observers:
             observer.observe(state)
-    state.elapsed = watch.elapsed()
+    if state.stop is not None and not end.running(state.time, state.step):
+        state.stop = None  # stopped after the last step: the run is complete all the same
+    state.elapsed = before + watch.elapsed()
     return state
 
 
 def run_collectively(comm, result, observers, state, loop):
     """Run ``loop()``, then let the observers finish and close ``result`` on every rank,
-    marked complete or not.
+    marked complete only when the loop ended neither by a failure nor by an interruption
+    (``state.outcome`` tells the observers which).
 
     An unexpected exception on one rank aborts the job: the collective close
     would otherwise wait for ranks still inside the loop. Case errors and run
     failures are raised on every rank together, so they close normally and keep
     the frames already written.
     """
-    complete = False
+    state.outcome = "failed"
     try:
         with abort_on_exception(comm, passthrough=(CaseError, RunFailure)):
             loop()
-        complete = True
+        state.outcome = state.stop or "complete"
     finally:
         try:
-            for observer in observers:
-                observer.finish(state)
+            with abort_on_exception(comm, passthrough=(CaseError, RunFailure)):
+                for observer in observers:
+                    observer.finish(state)
         finally:
-            result.close(complete)
+            result.close(state.outcome == "complete")
     return result.path

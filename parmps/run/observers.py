@@ -3,8 +3,14 @@
 An observer has ``start(state)`` (before the first step), ``observe(state)``
 (after every step; it decides from its own cadence whether to act) and
 ``finish(state)`` (at the end, also after a failure, before the file closes).
-Diagnostics, body series, frames and progress lines are observers; probes and
-checkpoints plug in the same way, without touching the loop.
+Diagnostics, body series, frames, progress lines and checkpoints are observers;
+probes plug in the same way, without touching the loop.
+
+An observer whose future depends on its past (a cadence, rows already written)
+has a ``name`` and contributes to checkpoints through ``checkpoint_state()``
+(collective; a dict of arrays and scalars, the same on every rank; it may
+first bring the file up to date) and ``restore_state(saved)`` (a continued run,
+before ``start``).
 """
 
 import logging
@@ -18,6 +24,14 @@ log = logging.getLogger("parmps.run")
 
 
 class Observer:
+    name = None  # the group of its checkpoint state; None: it has none
+
+    def checkpoint_state(self):
+        return {}
+
+    def restore_state(self, saved):
+        pass
+
     def start(self, state):
         pass
 
@@ -37,11 +51,21 @@ class Diagnostics(Observer):
     the end.
     """
 
+    name = "diagnostics"
+
     def __init__(self, result, columns, interval, end_time):
         self.result = result
-        self.series = Series(result.file.create_group("diagnostics"),
+        self.series = Series(result.file.require_group("diagnostics"),
                              {name: (dtype, ()) for name, dtype in columns.items()})
         self.cadence = SimulatedInterval(interval, end_time)
+
+    def checkpoint_state(self):
+        self.series.flush(self.result.comm.rank)
+        return {"rows": self.series.rows, "next_time": self.cadence.next_time}
+
+    def restore_state(self, saved):
+        self.series.truncate(int(saved["rows"]))
+        self.cadence.next_time = float(saved["next_time"])
 
     def observe(self, state):
         self.series.add(state.diagnostics)
@@ -69,6 +93,18 @@ class BodySeries(Observer):
                        for body in model.bodies}
         self.cadence = SimulatedInterval(interval, end_time)
 
+    name = "body_series"
+
+    def checkpoint_state(self):
+        self.flush()
+        return {"rows": next(iter(self.series.values())).rows if self.series else 0,
+                "next_time": self.cadence.next_time}
+
+    def restore_state(self, saved):
+        for series in self.series.values():
+            series.truncate(int(saved["rows"]))
+        self.cadence.next_time = float(saved["next_time"])
+
     def observe(self, state):
         values = self.model.series()
         extra = self.extra.series(state) if self.extra is not None else {}
@@ -88,17 +124,36 @@ class BodySeries(Observer):
 class Frames(Observer):
     """A frame at t = 0 and every ``interval`` of simulated time (and at the end)."""
 
+    name = "frames"
+
     def __init__(self, writer, interval, end_time, write_particles=True):
         self.writer = writer
         self.write_particles = write_particles
         self.cadence = SimulatedInterval(interval, end_time)
+        self.resumed = False
+        self.step = 0  # the last step seen
+
+    def checkpoint_state(self):
+        return {"next_time": self.cadence.next_time, "step": self.step}
+
+    def restore_state(self, saved):
+        """Frames after the checkpoint's step are written again, not twice."""
+        self.cadence.next_time = float(saved["next_time"])
+        self.step = int(saved["step"])
+        self.writer.drop_after(self.step)
+        self.resumed = True
 
     def start(self, state):
-        if self.write_particles:
+        if not self.write_particles:
+            return
+        if self.resumed:
+            self.writer.publish()  # the sidecar names the frames the file holds
+        else:
             self.writer.write(0, 0.0, 0.0, state.particles)
             self.writer.publish()
 
     def observe(self, state):
+        self.step = state.step
         if self.cadence.due(state.time) and self.write_particles:
             self.writer.write(state.step, state.time, state.dt, state.particles)
             self.writer.publish()
@@ -125,3 +180,41 @@ class Callback(Observer):
 
     def observe(self, state):
         self.function(state)
+
+
+class Checkpoints(Observer):
+    """A checkpoint every ``seconds`` of wall time (0: none), at the end and on an
+    interruption; and the ranks' agreement, after every step, on whether one was
+    interrupted (docs/design.md §3).
+
+    ``write(state)`` writes one (collective). ``interruption``: an object whose
+    ``requested`` is set by a signal handler on any rank. One allreduce of two
+    flags per step: an interruption anywhere, and rank 0's wall clock saying a
+    checkpoint is due (the ranks' clocks differ, so rank 0's alone decides).
+    """
+
+    def __init__(self, comm, write, seconds, interruption):
+        from mpi4py import MPI
+        self.mpi = MPI
+        self.comm = comm
+        self.write = write
+        self.cadence = WallInterval(seconds) if seconds > 0 else None
+        self.interruption = interruption
+        self.flags = np.zeros(2, np.int8)
+
+    def observe(self, state):
+        self.flags[0] = bool(self.interruption.requested)
+        self.flags[1] = self.comm.rank == 0 and self.cadence is not None and self.cadence.due()
+        self.comm.Allreduce(self.mpi.IN_PLACE, self.flags, op=self.mpi.MAX)
+        if self.flags[0]:
+            state.stop = "interrupted"
+            if self.comm.rank == 0:
+                log.warning("interrupted (%s) after step %d at t = %.6g s: writing the "
+                            "checkpoint", self.interruption.describe(), state.step, state.time)
+        elif self.flags[1]:
+            self.write(state)
+
+    def finish(self, state):
+        # A failed run keeps its last good checkpoint.
+        if state.outcome in ("complete", "interrupted"):
+            self.write(state)

@@ -8,16 +8,19 @@ coupling, open boundaries).
 """
 
 import logging
+import time as wallclock
 
 import numpy as np
 
 from parmps.core.particles import KIND_NAMES
 from parmps.core.settings import has_fluid
+from parmps.io.checkpoint import write_checkpoint
 from parmps.io.frames import FrameWriter
 from parmps.io.result import ResultFile
 from parmps.run import observers as observing
 from parmps.run.resources import memory_estimate
 from parmps.run.driver import DRIVER_DIAGNOSTICS, RunState, advance, run_collectively
+from parmps.run.interrupt import Interruption
 from parmps.run.schedule import EndCondition
 from parmps.run.steppers import FluidStepper, SolidStepper
 from parmps.run.timestep import choose_dt
@@ -29,10 +32,16 @@ log = logging.getLogger("parmps.run")
 class Simulation:
     """One run of a case: ``summary()`` for ``--check``, ``execute()`` to run it."""
 
-    def __init__(self, case, case_text, comm, directory, end_time=None, solver_options=None):
+    def __init__(self, case, case_text, comm, directory, end_time=None, solver_options=None,
+                 checkpoint=None):
         """``solver_options``: the pressure solver's options from the command line, by
-        name without the prefix (see :func:`parmps.fluid.ppe.initialise`)."""
+        name without the prefix (see :func:`parmps.fluid.ppe.initialise`).
+        ``checkpoint``: a :class:`parmps.io.checkpoint.Checkpoint` to continue from."""
         self.solver_options = dict(solver_options or {})
+        self.checkpoint = checkpoint
+        self.interruption = Interruption()
+        self.result = None
+        self.run_observers = []
         self.case = case
         self.case_text = case_text
         self.comm = comm
@@ -50,7 +59,19 @@ class Simulation:
             self.counts = {"solid node": sum(len(body.position) for body in self.model.bodies)}
             if comm.rank == 0:
                 self.state.particles = self.model.node_particles(every_node=True)
+        if checkpoint is not None:
+            self._restore(checkpoint.state)
 
+    def _restore(self, saved):
+        """The run's state as the checkpoint left it; the particles were distributed from
+        its global set (the halo and pair lists follow at the first step), and the bodies
+        are restored here, before the coupling's first step."""
+        self.state.restore_state(saved["run"])
+        self.stepper.restore_state(saved["stepper"])
+        if self.decomposition is None and self.comm.rank == 0:
+            self.state.particles = self.model.node_particles(every_node=True)
+        log.info("continuing from the checkpoint at step %d, t = %.6g s (written on %d "
+                 "rank(s))", self.state.step, self.state.time, self.checkpoint.ranks)
     def _set_up_fluid(self):
         from parmps.core import scene
         from parmps.fluid.projection import FluidSolver
@@ -71,7 +92,9 @@ class Simulation:
             moving_walls.set_velocity(global_scene, 0.0)
         self.counts = {KIND_NAMES[k]: int(np.count_nonzero(global_scene.kind == k))
                        for k in KIND_NAMES if np.any(global_scene.kind == k)}
-        self.state.particles = self.decomposition.distribute(global_scene)
+        # A continued run redistributes the checkpoint's particles over this rank count.
+        self.state.particles = self.decomposition.distribute(
+            global_scene if self.checkpoint is None else self.checkpoint.particles)
         self.fluid = FluidSolver(case, comm, self.decomposition)
         if self.model is not None:
             from parmps.coupling import coupling_scheme
@@ -146,18 +169,50 @@ class Simulation:
                 log.info("body %s: %d substeps of %.3g s per step of %.3g s", name, count,
                          dt / count, dt)
         try:
-            result = ResultFile(comm, self.directory, self.case_text)
+            result = ResultFile(comm, self.directory, self.case_text,
+                                resume=self.checkpoint is not None)
+            self.result = result
             observers = self.observers(result, extra_observers)
+            if self.checkpoint is not None:
+                saved = self.checkpoint.state["observers"]
+                for observer in observers:
+                    if observer.name is not None and observer.name in saved:
+                        observer.restore_state(saved[observer.name])
+            # Last: it sees the file as the other observers left it after the step.
+            observers.append(observing.Checkpoints(comm, self.write_checkpoint,
+                                                   case["output"]["checkpoint_interval"],
+                                                   self.interruption))
+            self.run_observers = observers
             end = EndCondition(self.end_time, case["time"]["max_steps"])
-            path = run_collectively(comm, result, observers, self.state, lambda: advance(
-                comm, self.state, self.stepper, observers, end, case["time"]))
+            with self.interruption.installed():
+                path = run_collectively(comm, result, observers, self.state, lambda: advance(
+                    comm, self.state, self.stepper, observers, end, case["time"]))
         finally:
             if self.pressure_solver is not None:
                 self.pressure_solver.destroy()
         state = self.state
+        if state.outcome == "interrupted":
+            log.info("stopped at step %d, t = %.4g s after %.1f s", state.step, state.time,
+                     state.elapsed)
+            return path
         log.info("done: %d steps to t = %.4g s in %.1f s (%.3g particle-steps/s, %.2f us per "
                  "particle-step)%s", state.step, state.time, state.elapsed,
                  state.particle_steps / max(state.elapsed, 1e-12),
                  1e6 * state.elapsed / max(state.particle_steps, 1),
                  self.stepper.summary(state))
         return path
+
+    def write_checkpoint(self, state):
+        """Write OUTDIR/checkpoint.h5 from every contributor's state (collective)."""
+        start = wallclock.perf_counter()
+        saved = {"run": state.checkpoint_state(),
+                 "stepper": self.stepper.checkpoint_state(),
+                 "observers": {observer.name: observer.checkpoint_state()
+                               for observer in self.run_observers if observer.name is not None}}
+        # The result file as the checkpoint knows it: a crash after this loses no frame
+        # the checkpoint counts on.
+        self.result.file.flush()
+        size = write_checkpoint(self.comm, self.directory, self.case_text, state.particles,
+                                saved)
+        log.info("checkpoint at step %d, t = %.6g s: %.3g MB in %.2f s", state.step,
+                 state.time, size / 1e6, wallclock.perf_counter() - start)

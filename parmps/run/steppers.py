@@ -4,7 +4,8 @@ A stepper has ``DIAGNOSTICS`` (its own columns, name -> dtype), ``start(state)``
 ``dt_limits(state)`` (a list of :class:`~parmps.run.timestep.Limit`),
 ``advance(state, dt)`` (from ``state.time``; the step is ``state.step + 1``),
 ``check(state)`` (after the step: stop loudly if it went wrong),
-``diagnostics(state)`` and ``progress(state)`` (a progress line's text).
+``diagnostics(state)`` and ``progress(state)`` (a progress line's text), and
+``checkpoint_state()`` / ``restore_state(saved)`` for checkpoints.
 
 - :class:`FluidStepper`: one MPS projection step of the particles, with the
   decomposition's update and every participant of the step (moving walls, a
@@ -50,6 +51,15 @@ class FluidStepper:
             self.DIAGNOSTICS.update(participant.DIAGNOSTICS)
         self.fluid_speed = 0.0
         self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0}
+
+    def checkpoint_state(self):
+        """Every participant's state, by its name (collective)."""
+        return {p.name: p.checkpoint_state() for p in self.participants if p.name is not None}
+
+    def restore_state(self, saved):
+        for participant in self.participants:
+            if participant.name is not None:
+                participant.restore_state(saved[participant.name])
 
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
@@ -173,6 +183,13 @@ class SolidStepper:
         self.model = model
         self.lower = np.asarray(case["domain"]["lower"])
         self.upper = np.asarray(case["domain"]["upper"])
+
+    def checkpoint_state(self):
+        # Every rank advances every body alike: any rank's state is the state.
+        return {"bodies": self.model.state()}
+
+    def restore_state(self, saved):
+        self.model.restore(saved["bodies"])
 
     def start(self, state):
         pass

@@ -228,7 +228,7 @@ class Body:
         self.rest_volume = self.volume() if len(self.boundary) >= 3 else 0.0
         self.fluid_force = np.zeros((n, 2))
         self.acceleration = None  # set by the first force evaluation
-        self.quadratic_prediction = False  # True: see SolidSystem's constraint_prediction
+        self.quadratic_prediction = False  # True: see MassSpringModel's constraint_prediction
         self.multiplier = 0.0
 
     # -- geometry and diagnostics --------------------------------------------

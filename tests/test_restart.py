@@ -1,0 +1,182 @@
+"""Checkpoints, --restart and interruption (README "Long runs", docs/design.md §3, §5).
+
+A run continued from its checkpoint on another rank count must follow the
+uninterrupted run particle by particle (to round-off: the pressure is solved to
+rtol 1e-12), with every frame once and the series rows once.
+"""
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+from conftest import CASES, error_lines, mpi_environment, run_parmps
+from parmps.io.frames import read_frame, read_frames
+from parmps.parallel.mpi import launch_environment, mpirun_command
+
+TIGHT = ["-pressure_ksp_rtol", "1e-12"]
+
+# (case, extra arguments, first end time, end time, ranks before, ranks after).
+# A run ending at the first end time clips its last step to land on it, which the
+# uninterrupted run does not: the times differ by round-off from there on. So the
+# end times stay where dt is dt_max (no step length differs but by round-off) and
+# off the inlet's events (its columns enter and turn fluid at 0.05 + k 0.1 s, a tie
+# that round-off in the time decides).
+SCENES = {
+    "box_in_flow": ("box_in_flow.toml", [], 0.16, 0.3, 2, 3),
+    "membrane_tube": ("membrane_tube.toml", ["--set", "time.output_interval=0.05"],
+                      0.1, 0.2, 1, 2),
+    "dam_break": ("dam_break.toml", ["--set", "particles.spacing=0.01",
+                                     "--set", "time.output_interval=0.025"], 0.05, 0.1, 2, 1),
+}
+
+
+def _run(args, ranks, timeout=600):
+    result = run_parmps(list(args) + TIGHT, ranks=ranks, timeout=timeout)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return result
+
+
+def _domain_size(case_file):
+    import tomllib
+    with open(CASES / case_file, "rb") as handle:
+        domain = tomllib.load(handle)["domain"]
+    return float(np.max(np.subtract(domain["upper"], domain["lower"])))
+
+
+def _series_steps(path):
+    with h5py.File(path, "r") as handle:
+        steps = handle["diagnostics/step"][()]
+        bodies = {name: handle[f"solids/{name}/time"][()] for name in handle.get("solids", {})}
+        return steps, bodies, bool(handle.attrs["complete"])
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+def test_restart_on_another_rank_count_follows_the_uninterrupted_run(scene, tmp_path):
+    case_file, extra, first_end, end, before, after = SCENES[scene]
+    case = str(CASES / case_file)
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    _run([case, "-o", whole, "--end-time", end] + extra, before)
+    _run([case, "-o", split, "--end-time", first_end] + extra, before)
+    with h5py.File(split / "checkpoint.h5", "r") as handle:
+        first_step = int(handle["state/run/step"][()])
+    _run(["--restart", split, "--end-time", end], after)
+
+    expected, got = read_frames(whole / "result.h5"), read_frames(split / "result.h5")
+    steps = [int(frame["step"]) for frame in got]
+    # The first run's end has a frame of its own, off the output interval or not.
+    assert steps == sorted({int(frame["step"]) for frame in expected} | {first_step})
+    last, reference = got[-1], expected[-1]
+    assert last["time"] == pytest.approx(end)
+    np.testing.assert_array_equal(last["id"], reference["id"])
+    difference = np.abs(last["position"] - reference["position"]).max()
+    assert difference < 1e-9 * _domain_size(case_file), difference
+
+    steps_whole, bodies_whole, _ = _series_steps(whole / "result.h5")
+    steps_split, bodies_split, complete = _series_steps(split / "result.h5")
+    assert complete
+    np.testing.assert_array_equal(steps_split, steps_whole)
+    np.testing.assert_array_equal(steps_split, np.arange(1, len(steps_split) + 1))
+    for name, times in bodies_whole.items():
+        np.testing.assert_allclose(bodies_split[name], times, rtol=1e-12)
+    text = (split / "result.xdmf").read_text()
+    assert text.count('<Grid Name="step ') == len(steps)
+
+
+def test_solid_only_restart_and_refusals(tmp_path):
+    """A solid-only run continues exactly; a different case file, -o elsewhere and a
+    directory without a checkpoint are refused in one line (exit 2)."""
+    case = CASES / "mass_spring_7x7.toml"
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    for args in ([case, "-o", whole, "--end-time", "0.3"],
+                 [case, "-o", split, "--end-time", "0.15"],
+                 # the same case file is accepted with --restart
+                 ["--restart", split, case, "--end-time", "0.3"]):
+        result = run_parmps(args, timeout=120)
+        assert result.returncode == 0, result.stderr[-2000:]
+    a, b = read_frame(whole / "result.h5"), read_frame(split / "result.h5")
+    assert a["step"] == b["step"] == 300
+    assert np.abs(a["position"] - b["position"]).max() < 1e-12
+    assert len(read_frames(split / "result.h5")) == len(read_frames(whole / "result.h5"))
+
+    # A run that crashed after its checkpoint left frames and rows behind it: the
+    # continued run drops them and writes them again, once.
+    shutil.copy(split / "checkpoint.h5", tmp_path / "early.h5")
+    result = run_parmps(["--restart", split, "--end-time", "0.45"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    shutil.copy(tmp_path / "early.h5", split / "checkpoint.h5")
+    result = run_parmps(["--restart", split, "--end-time", "0.3"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    frames = read_frames(split / "result.h5")
+    assert [f["step"] for f in frames] == [f["step"] for f in read_frames(whole / "result.h5")]
+    assert np.abs(frames[-1]["position"] - a["position"]).max() < 1e-12
+    steps, _, complete = _series_steps(split / "result.h5")
+    assert complete
+    np.testing.assert_array_equal(steps, np.arange(1, 301))
+
+    for args, words in (
+            (["--restart", split, CASES / "box_in_flow.toml"], "differs from the case"),
+            (["--restart", split, "-o", tmp_path / "other"], "cannot go with it"),
+            (["--restart", tmp_path / "empty"], "no checkpoint.h5")):
+        result = run_parmps(args, timeout=60)
+        assert result.returncode == 2, result.stderr
+        lines = error_lines(result.stderr)
+        assert len(lines) == 1 and words in lines[0], result.stderr
+
+
+def _start(args, log_path):
+    command = mpirun_command(2, [sys.executable, "-m", "parmps"] + [str(a) for a in args])
+    log = open(log_path, "w")
+    process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT,
+                               start_new_session=True,
+                               env=launch_environment(mpi_environment()))
+    return process, log
+
+
+def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
+    output, log_path = tmp_path / "run", tmp_path / "run.log"
+    process, log = _start([CASES / "box_in_flow.toml", "-o", output], log_path)
+    try:
+        deadline = time.monotonic() + 300
+        # Into the time loop, past the first step (and any compilation): a progress line.
+        while "particle-steps/s" not in log_path.read_text():
+            assert process.poll() is None, log_path.read_text()
+            assert time.monotonic() < deadline, "the run never started"
+            time.sleep(0.5)
+        time.sleep(1.0)
+        process.send_signal(signal.SIGTERM)
+        sent = time.monotonic()
+        process.wait(timeout=30)
+        seconds = time.monotonic() - sent
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+        log.close()
+    text = log_path.read_text()
+    assert process.returncode != 0, text
+    assert seconds < 30
+    assert "--restart" in text and "interrupted" in text, text
+    with h5py.File(output / "result.h5", "r") as handle:
+        assert not handle.attrs["complete"]
+    frames = read_frames(output / "result.h5")
+    assert frames and frames[0]["step"] == 0
+    with h5py.File(output / "checkpoint.h5", "r") as handle:
+        stopped = float(handle["state/run/time"][()])
+    assert 0.0 < stopped < 2.0
+
+    end = stopped + 0.02
+    result = run_parmps(["--restart", output, "--end-time", end], ranks=2, timeout=300)
+    assert result.returncode == 0, result.stderr[-3000:]
+    with h5py.File(output / "result.h5", "r") as handle:
+        assert handle.attrs["complete"]
+        steps = handle["diagnostics/step"][()]
+    np.testing.assert_array_equal(steps, np.arange(1, len(steps) + 1))
+    frames = read_frames(output / "result.h5")
+    assert frames[-1]["time"] == pytest.approx(end)
+    assert len({int(f["step"]) for f in frames}) == len(frames)
