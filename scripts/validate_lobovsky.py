@@ -114,6 +114,14 @@ def main():
             if not abs(row["mean_error"]) <= tolerance["mean"]:
                 failed.append(f"{name} mean {100 * row['mean_error']:+.1f} % "
                               f"(target ±{100 * tolerance['mean']:.0f} %)")
+    import h5py
+    with h5py.File(result, "r") as handle:
+        complete = bool(handle.attrs["complete"])
+        reached = float(handle["diagnostics"]["time"][-1]) * time_scale
+    if not complete or reached < check.metric["mean_window"][1]:
+        # The mean then covers only part of its window: nothing is judged met.
+        failed.append(f"the run stopped at t* = {reached:.2f} (complete: {complete})")
+    print(f"the run reached t* = {reached:.3f}")
     print("targets missed: " + "; ".join(failed) if failed else "every target met")
     print(f"wrote {args.png} and {level_png}")
     return 1 if failed else 0
@@ -135,11 +143,18 @@ def run_case(check, args):
     command += [word for override in overrides for word in ("--set", override)]
     if args.ranks > 1:
         from parmps.parallel.mpi import launch_environment, mpirun_command
-        subprocess.run(mpirun_command(args.ranks, command), check=True,
-                       env=launch_environment())
+        status = subprocess.run(mpirun_command(args.ranks, command),
+                                env=launch_environment()).returncode
     else:
-        subprocess.run(command, check=True)
-    return os.path.join(directory, "result.h5")
+        status = subprocess.run(command).returncode
+    path = os.path.join(directory, "result.h5")
+    if status != 0:
+        if not os.path.isfile(path):
+            sys.exit(status)
+        # A run stopped by a guard keeps its probes up to the stop: judge what there is.
+        print(f"the run stopped early (exit status {status}); judging the probes it wrote",
+              file=sys.stderr)
+    return path
 
 
 if __name__ == "__main__":
