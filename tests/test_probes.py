@@ -215,7 +215,6 @@ def still_tank(tmp_path_factory):
     return out
 
 
-@pytest.mark.slow
 def test_still_tank_probes_read_hydrostatics(still_tank):
     result = still_tank / "result.h5"
     case = analysis.result_case(result)
