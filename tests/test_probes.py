@@ -7,6 +7,7 @@ Lobovsky case's set-up, and the same values on 1, 2 and 3 ranks.
 - The still tank: a pressure probe at y = H/4 reads rho g (H - y) within 2 % averaged
   over 0.5-2 s, a wall probe beside it too, the level reads H within a spacing and the
   force on a side wall rho g H^2 / 2 per metre within 2 %.
+- A force probe on a body reads the coupling's sum over its nodes.
 - Under mpirun the dam break's probes, one with its support across a slab edge, read the
   same on 1, 2 and 3 ranks.
 """
@@ -314,3 +315,25 @@ def test_probes_read_the_same_on_any_rank_count(dam_break_case, one_rank_probes,
         np.testing.assert_array_equal(t, t1)
         assert np.all(np.isfinite(v1)) or name == "level", name
         np.testing.assert_allclose(v, v1, rtol=1e-8, atol=1e-6, err_msg=name)
+
+
+# -- the force on a body ----------------------------------------------------------------
+
+def test_force_on_a_body_is_the_couplings_sum_over_its_nodes(tmp_path):
+    path = tmp_path / "archimedes_probe.toml"
+    path.write_text((CASES.parent / "tests" / "cases" / "archimedes.toml").read_text() + """
+[[probe]]
+name = "block_force"
+kind = "force"
+body = "block"
+""")
+    out = tmp_path / "out"
+    result = run_parmps([path, "-o", out, "--end-time", "0.05", "--set", "output.frames=false"],
+                        timeout=300)
+    assert result.returncode == 0, result.stderr
+    t, force = analysis.read_probe(out / "result.h5", "block_force")
+    with h5py.File(out / "result.h5", "r") as handle:
+        body = handle["solids"]["block"]
+        np.testing.assert_array_equal(t, body["time"][()])
+        np.testing.assert_array_equal(force, body["fluid_force"][()])
+    assert force.shape == (len(t), 2) and np.any(force[:, 1] > 0)
