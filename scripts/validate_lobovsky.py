@@ -43,7 +43,6 @@ def main():
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
     result = args.result or run_case(check, args)
     case = analysis.result_case(result)

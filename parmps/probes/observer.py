@@ -116,6 +116,8 @@ class Probes(Observer):
     # -- the run -------------------------------------------------------------------------
 
     def start(self, state):
+        log.info("probes: %s, written to %s", ", ".join(f"{p.name} ({p.kind})"
+                                                        for p in self.probes), self.csv_directory)
         if self.comm.rank == 0:
             os.makedirs(self.csv_directory, exist_ok=True)
             for probe in self.probes:
