@@ -311,14 +311,14 @@ def first_crossing(t, value, threshold):
 
 
 def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
-                            mean_window=(3.0, 6.0)):
+                            mean_window=(3.0, 6.0), peak_until=6.0):
     """Wall pressure probes of a dam break against measured records, in the experiment's
     scales: t* = t sqrt(g/H), p* = p / (rho g H), H the column's height from ``case``.
 
     ``references``: probe name -> CSV of (t*, p*). Per probe: ``arrival`` (the first t*
     with p* > ``arrival_threshold``), ``mean`` (the time average over ``mean_window`` in t*)
-    and ``peak`` (the largest p* and its t*), each simulated and measured, with the
-    arrival's difference and the mean's relative difference.
+    and ``peak`` (the largest p* for t* <= ``peak_until`` and its t*), each simulated and
+    measured, with the arrival's difference and the mean's relative difference.
     """
     lower, upper = fluid_extent(case)
     height = upper[1] - lower[1]
@@ -330,16 +330,18 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
         t, p = read_probe(path, name)
         t, p = t * time_scale, p / pressure_scale
         te, pe = list(reference_table(reference).values())[:2]
-        finite = np.isfinite(p)
+        finite = np.isfinite(p) & (t <= peak_until)
         peak = int(np.argmax(np.where(finite, p, -np.inf))) if finite.any() else 0
+        measured_peak = int(np.argmax(np.where(te <= peak_until, pe, -np.inf)))
         row = {"arrival": first_crossing(t, p, arrival_threshold),
                "arrival_measured": first_crossing(te, pe, arrival_threshold),
                "mean": window_mean(t, p, *mean_window),
                "mean_measured": window_mean(te, pe, *mean_window),
                "peak": float(p[peak]) if finite.any() else math.nan,
                "peak_time": float(t[peak]) if finite.any() else math.nan,
-               "peak_measured": float(pe.max()), "peak_time_measured": float(te[pe.argmax()]),
-               "nan_fraction": float(np.mean(~finite))}
+               "peak_measured": float(pe[measured_peak]),
+               "peak_time_measured": float(te[measured_peak]),
+               "nan_fraction": float(np.mean(~np.isfinite(p)))}
         row["arrival_error"] = row["arrival"] - row["arrival_measured"]
         row["mean_error"] = row["mean"] / row["mean_measured"] - 1.0
         out[name] = row
