@@ -14,11 +14,12 @@ from parmps.coupling import settings as coupling
 from parmps.fluid import settings as fluid
 from parmps.io import settings as io
 from parmps.parallel import settings as parallel
+from parmps.probes import settings as probes
 from parmps.run import settings as run
 from parmps.solids import settings as solids
 
 # Checks run in this order, each after every section is validated.
-COMPONENTS = (core, fluid, run, boundaries, solids, coupling, parallel, io)
+COMPONENTS = (core, fluid, run, boundaries, solids, coupling, parallel, io, probes)
 
 SECTIONS = {name: section for component in COMPONENTS
             for name, section in component.SECTIONS.items()}

@@ -50,6 +50,10 @@ class Validation:
         arguments = {key: value for key, value in self.metric.items() if key != "function"}
         if self.reference is not None:
             arguments["reference"] = self.reference
+        if isinstance(arguments.get("references"), dict):
+            # Several reference files (one per probe), named relative to the folder.
+            arguments["references"] = {key: os.path.join(self.folder, value)
+                                       for key, value in arguments["references"].items()}
         return arguments
 
     def measure(self, result, **overrides):
@@ -110,8 +114,11 @@ def load(name, directory=DIRECTORY):
         other_cases={key: os.path.join(root, value)
                      for key, value in tables["other_cases"].items()},
         **{table: tables[table] for table in TABLES if table != "other_cases"})
+    references = validation.metric_arguments.get("references")
     missing = [p for p in [validation.case_path, validation.reference,
-                           *validation.other_cases.values()] if p and not os.path.isfile(p)]
+                           *validation.other_cases.values(),
+                           *(references.values() if isinstance(references, dict) else ())]
+               if p and not os.path.isfile(p)]
     if missing:
         raise CaseError(f"{path}: {missing[0]} not found")
     from parmps.tools import analysis

@@ -180,3 +180,28 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     frames = read_frames(output / "result.h5")
     assert frames[-1]["time"] == pytest.approx(end)
     assert len({int(f["step"]) for f in frames}) == len(frames)
+
+
+def test_probes_go_on_after_a_restart_without_repeating_rows(tmp_path):
+    """A probe's series in result.h5 and its CSV hold every sample once across a restart."""
+    case = tmp_path / "tank_with_probe.toml"
+    case.write_text((CASES / "hydrostatic.toml").read_text() +
+                    '\n[[probe]]\nname = "bottom"\nkind = "pressure"\nposition = [0.1, 0.05]\n')
+    common = ["-pressure_ksp_rtol", "1e-12"]
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    assert _run([case, "-o", whole, "--end-time", "0.1"] + common, 1).returncode == 0
+    assert _run([case, "-o", split, "--end-time", "0.05"] + common, 1).returncode == 0
+    result = _run(["--restart", split, "--end-time", "0.1"] + common, 2)
+    assert result.returncode == 0, result.stderr
+    rows = {}
+    for name, out in (("whole", whole), ("split", split)):
+        with h5py.File(out / "result.h5", "r") as handle:
+            rows[name] = (handle["probes/bottom/time"][()], handle["probes/bottom/value"][()])
+        table = np.loadtxt(out / "probes" / "bottom.csv", delimiter=",", comments="#",
+                           skiprows=2)
+        np.testing.assert_array_equal(table[:, 0], rows[name][0])
+        np.testing.assert_array_equal(table[:, 1], rows[name][1])
+    np.testing.assert_allclose(rows["split"][0], rows["whole"][0], rtol=1e-12)
+    assert len(rows["whole"][0]) == 100
+    # Pressures of about 500 Pa, continued on another rank count.
+    np.testing.assert_allclose(rows["split"][1], rows["whole"][1], rtol=0, atol=1e-6)

@@ -143,6 +143,10 @@ class Simulation:
         if self.model is not None:
             found.append(observing.BodySeries(result, self.model, self.coupling, interval,
                                               self.end_time))
+        if case["probe"]:
+            from parmps.probes.observer import Probes
+            found.append(Probes(result, case["probe"], case["particles"]["spacing"],
+                                self.model, interval, self.end_time))
         found += [observing.Frames(writer, interval, self.end_time, case["output"]["frames"]),
                   observing.Progress(self._progress_line)]
         return found

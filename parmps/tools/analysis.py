@@ -281,3 +281,68 @@ def inflow_rate(case):
     along = int(np.argmax(np.abs(inlet["velocity"])))
     width = inlet["upper"][1 - along] - inlet["lower"][1 - along]
     return float(np.hypot(*inlet["velocity"]) * width / case["particles"]["spacing"] ** 2)
+
+
+# --------------------------------------------------------------------------
+# Probes
+
+def read_probe(path, name):
+    """(time, value) of the probe ``name`` in a result file; ``value`` in SI units."""
+    import h5py
+    with h5py.File(path, "r") as handle:
+        group = handle["probes"][name]
+        return group["time"][()], group["value"][()]
+
+
+def window_mean(t, value, start, end):
+    """Time average of a sampled series over [start, end] (trapezoids over its samples,
+    NaN samples left out); NaN when fewer than two samples fall in the window."""
+    keep = (t >= start) & (t <= end) & np.isfinite(value)
+    if np.count_nonzero(keep) < 2:
+        return math.nan
+    t, value = t[keep], value[keep]
+    return float(np.sum(0.5 * (value[1:] + value[:-1]) * np.diff(t)) / (t[-1] - t[0]))
+
+
+def first_crossing(t, value, threshold):
+    """The first time ``value`` exceeds ``threshold``; NaN if it never does."""
+    above = np.flatnonzero(np.nan_to_num(value, nan=-np.inf) > threshold)
+    return float(t[above[0]]) if len(above) else math.nan
+
+
+def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
+                            mean_window=(3.0, 6.0), peak_until=6.0):
+    """Wall pressure probes of a dam break against measured records, in the experiment's
+    scales: t* = t sqrt(g/H), p* = p / (rho g H), H the column's height from ``case``.
+
+    ``references``: probe name -> CSV of (t*, p*). Per probe: ``arrival`` (the first t*
+    with p* > ``arrival_threshold``), ``mean`` (the time average over ``mean_window`` in t*)
+    and ``peak`` (the largest p* for t* <= ``peak_until`` and its t*), each simulated and
+    measured, with the arrival's difference and the mean's relative difference.
+    """
+    lower, upper = fluid_extent(case)
+    height = upper[1] - lower[1]
+    g = gravity(case)
+    time_scale = math.sqrt(g / height)
+    pressure_scale = case["fluid"]["density"] * g * height
+    out = {}
+    for name, reference in references.items():
+        t, p = read_probe(path, name)
+        t, p = t * time_scale, p / pressure_scale
+        te, pe = list(reference_table(reference).values())[:2]
+        finite = np.isfinite(p) & (t <= peak_until)
+        peak = int(np.argmax(np.where(finite, p, -np.inf))) if finite.any() else 0
+        measured_peak = int(np.argmax(np.where(te <= peak_until, pe, -np.inf)))
+        row = {"arrival": first_crossing(t, p, arrival_threshold),
+               "arrival_measured": first_crossing(te, pe, arrival_threshold),
+               "mean": window_mean(t, p, *mean_window),
+               "mean_measured": window_mean(te, pe, *mean_window),
+               "peak": float(p[peak]) if finite.any() else math.nan,
+               "peak_time": float(t[peak]) if finite.any() else math.nan,
+               "peak_measured": float(pe[measured_peak]),
+               "peak_time_measured": float(te[measured_peak]),
+               "nan_fraction": float(np.mean(~np.isfinite(p)))}
+        row["arrival_error"] = row["arrival"] - row["arrival_measured"]
+        row["mean_error"] = row["mean"] / row["mean_measured"] - 1.0
+        out[name] = row
+    return out
