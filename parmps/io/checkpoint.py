@@ -22,6 +22,7 @@ import numpy as np
 
 from parmps import __version__
 from parmps.core.particles import FIELDS, Particles
+from parmps.io.frames import write_by_id
 from parmps.io.result import open_file
 
 CHECKPOINT = "checkpoint.h5"
@@ -37,23 +38,14 @@ def write_checkpoint(comm, directory, case_text, particles, tree):
     Returns the size of the file in bytes.
     """
     # Here, not at the top: reading a checkpoint back must not start MPI.
-    from parmps.parallel.slabs import by_id_blocks
     path = checkpoint_path(directory)
     temporary = path + ".tmp"
-    owned, offset, total = by_id_blocks(particles, comm)
-    count = owned.n_owned
     handle = open_file(temporary, comm, "w")
     try:
         handle.attrs["toml"] = case_text
         handle.attrs["parmps_version"] = __version__
         handle.attrs["ranks"] = comm.size
-        group = handle.create_group("particles")
-        for name in FIELDS:
-            data = owned.arrays[name]
-            dataset = group.create_dataset(name, shape=(total,) + data.shape[1:],
-                                           dtype=data.dtype)
-            if count:
-                dataset[offset:offset + count] = data
+        write_by_id(handle.create_group("particles"), particles, FIELDS, comm)
         _write_tree(handle.create_group("state"), tree, comm.rank)
     finally:
         handle.close()

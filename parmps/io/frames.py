@@ -58,20 +58,11 @@ class FrameWriter:
         The particles are first regrouped by blocks of ids, so the frame is one
         array in ascending id whatever the rank count.
         """
-        # Here, not at the top: reading frames back must not start MPI.
-        from parmps.parallel.slabs import by_id_blocks
-        owned, offset, total = by_id_blocks(particles, self.comm)
-        count = len(owned)
         group = self.frames.create_group(f"{step:08d}")
         group.attrs["time"] = time
         group.attrs["step"] = step
         group.attrs["dt"] = dt
-        for name in FRAME_FIELDS:
-            data = owned.arrays[name]
-            dataset = group.create_dataset(name, shape=(total,) + data.shape[1:],
-                                           dtype=data.dtype)
-            if count:
-                dataset[offset:offset + count] = data
+        total = write_by_id(group, particles, FRAME_FIELDS, self.comm)
         if self.solids is not None:
             solids = group.create_group("solids")
             for body in self.solids.bodies:
@@ -102,6 +93,25 @@ class FrameWriter:
         if self.comm.rank == 0:
             write_xdmf(self.result.xdmf_path, os.path.basename(self.result.path),
                        self.frame_list, len(self.vertex_index), self.dimension, self.bodies)
+
+
+def write_by_id(group, particles, fields, comm):
+    """Write ``fields`` of the owned particles into ``group`` as arrays sorted by global id,
+    whatever the rank count; collective. Returns the particle count.
+
+    The particles are first regrouped by blocks of ids, so each rank writes one
+    contiguous block at the offset of an exclusive scan.
+    """
+    # Here, not at the top: reading frames back must not start MPI.
+    from parmps.parallel.slabs import by_id_blocks
+    owned, offset, total = by_id_blocks(particles, comm)
+    count = owned.n_owned
+    for name in fields:
+        data = owned.arrays[name]
+        dataset = group.create_dataset(name, shape=(total,) + data.shape[1:], dtype=data.dtype)
+        if count:
+            dataset[offset:offset + count] = data
+    return total
 
 
 def read_frame(path, step=None):
