@@ -10,8 +10,8 @@ Positions and vector fields are (N, d) arrays; d is ``position.shape[1]``.
 
 How the loops are written:
 
-* Every pair is visited through one prologue, :func:`_distance2` (|r_ij|^2)
-  and :func:`_component` (component k of r_ij = x_j - x_i). Component sums run
+* Every pair is visited through one prologue, :func:`pair_distance2` (|r_ij|^2)
+  and :func:`pair_component` (component k of r_ij = x_j - x_i). Component sums run
   over k = 0, 1, ... in order, so in 2D every result is bit for bit what the
   former explicit x/y code gave (0.0 + a + b == a + b; no dot products, no
   sqrt-then-square).
@@ -33,7 +33,7 @@ def _weight(distance, radius):
 
 
 @numba.njit(cache=True, inline="always")
-def _distance2(position, i, j, d):
+def pair_distance2(position, i, j, d):
     """|r_ij|^2 for r_ij = x_j - x_i, summed over the d components in order."""
     r2 = 0.0
     for k in range(d):
@@ -43,8 +43,8 @@ def _distance2(position, i, j, d):
 
 
 @numba.njit(cache=True, inline="always")
-def _component(position, i, j, k):
-    """Component k of r_ij = x_j - x_i (the very value :func:`_distance2` squares)."""
+def pair_component(position, i, j, k):
+    """Component k of r_ij = x_j - x_i (the very value :func:`pair_distance2` squares)."""
     return position[j, k] - position[i, k]
 
 
@@ -65,7 +65,7 @@ def _number_density(indptr, cols, position, radius, n_rows, d):
         within = 0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            w = _weight(np.sqrt(_distance2(position, i, j, d)), radius)
+            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
             if w > 0.0:
                 total += w
                 within += 1
@@ -91,7 +91,7 @@ def _vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, d):
     for i in range(n_rows):
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            w = _weight(np.sqrt(_distance2(position, i, j, d)), radius)
+            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
             if w > 0.0:
                 for k in range(d):
                     out[i, k] += (field[j, k] - field[i, k]) * w
@@ -116,12 +116,12 @@ def _divergence_sum(indptr, cols, position, field, radius, n_rows, d):
         total = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            r2 = _distance2(position, i, j, d)
+            r2 = pair_distance2(position, i, j, d)
             w = _weight(np.sqrt(r2), radius)
             if w > 0.0:
                 projected = 0.0
                 for k in range(d):
-                    projected += (field[j, k] - field[i, k]) * _component(position, i, j, k)
+                    projected += (field[j, k] - field[i, k]) * pair_component(position, i, j, k)
                 total += projected * w / r2
         out[i] = total
     return out
@@ -148,18 +148,18 @@ def _pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radiu
             j = cols[p]
             if not has_pressure[j]:
                 continue
-            if _distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
+            if pair_distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
                 minimum = pressure[j]
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             if not has_pressure[j]:
                 continue
-            r2 = _distance2(position, i, j, d)
+            r2 = pair_distance2(position, i, j, d)
             w = _weight(np.sqrt(r2), radius)
             if w > 0.0:
                 factor = (pressure[j] - minimum) * w / r2
                 for k in range(d):
-                    out[i, k] += factor * _component(position, i, j, k)
+                    out[i, k] += factor * pair_component(position, i, j, k)
     return out
 
 
@@ -248,13 +248,13 @@ def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradi
             j = cols[p]
             if not has_pressure[j]:
                 continue
-            r2 = _distance2(position, i, j, d)
+            r2 = pair_distance2(position, i, j, d)
             w = _weight(np.sqrt(r2), radius)
             if w > 0.0:
                 for k in range(d):
                     for m in range(k, d):
-                        a[k, m] += _component(position, i, j, k) * \
-                            _component(position, i, j, m) * w / r2
+                        a[k, m] += pair_component(position, i, j, k) * \
+                            pair_component(position, i, j, m) * w / r2
         for k in range(d):
             for m in range(k, d):
                 a[k, m] *= scale
@@ -327,20 +327,20 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
             continue
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            r2 = _distance2(position, i, j, d)
+            r2 = pair_distance2(position, i, j, d)
             if r2 >= limit2 or r2 <= 0.0:
                 continue
             r = np.sqrt(r2)
             # The unit vector r_ij / r, component by component.
             approach = 0.0
             for k in range(d):
-                approach += (velocity[i, k] - velocity[j, k]) * (_component(position, i, j, k) / r)
+                approach += (velocity[i, k] - velocity[j, k]) * (pair_component(position, i, j, k) / r)
             if approach <= 0.0:
                 continue
             share = 0.5 if moving[j] else 1.0
             impulse = (1.0 + restitution) * share * approach
             for k in range(d):
-                out[i, k] -= impulse * (_component(position, i, j, k) / r)
+                out[i, k] -= impulse * (pair_component(position, i, j, k) / r)
     return out
 
 
@@ -381,7 +381,7 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
                 j = cols[p]
                 if row_number[j] < 0 or not is_unknown[j]:
                     continue
-                if _weight(np.sqrt(_distance2(position, i, j, d)), radius) > 0.0:
+                if _weight(np.sqrt(pair_distance2(position, i, j, d)), radius) > 0.0:
                     length += 1
         row_ptr[k + 1] = row_ptr[k] + length
         k += 1
@@ -402,7 +402,7 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
             j = cols[p]
             if row_number[j] < 0:
                 continue
-            w = _weight(np.sqrt(_distance2(position, i, j, d)), radius)
+            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
             if w <= 0.0:
                 continue
             diagonal += coefficient * w

@@ -28,15 +28,7 @@ formulas and was read alongside.
 import numba
 import numpy as np
 
-
-@numba.njit(cache=True, inline="always")
-def _separation(position, i, j, offset):
-    """Fill ``offset`` with r_j - r_i and return |r_j - r_i|^2."""
-    r2 = 0.0
-    for k in range(position.shape[1]):
-        offset[k] = position[j, k] - position[i, k]
-        r2 += offset[k] * offset[k]
-    return r2
+from parmps.core.kernels import pair_component, pair_distance2
 
 
 @numba.njit(cache=True)
@@ -50,17 +42,16 @@ def number_density_rate(indptr, cols, position, velocity, radius, n_rows):
     """
     dimension = position.shape[1]
     out = np.zeros(n_rows)
-    offset = np.empty(dimension)
     for i in range(n_rows):
         total = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            r2 = _separation(position, i, j, offset)
+            r2 = pair_distance2(position, i, j, dimension)
             if r2 <= 0.0 or r2 >= radius * radius:
                 continue
             approach = 0.0
             for k in range(dimension):
-                approach += offset[k] * (velocity[j, k] - velocity[i, k])
+                approach += pair_component(position, i, j, k) * (velocity[j, k] - velocity[i, k])
             total += approach / (r2 * np.sqrt(r2))
         out[i] = -radius * total
     return out
@@ -77,14 +68,13 @@ def higher_order_laplacian_sum(indptr, cols, position, field, include, radius, n
     """
     dimension = position.shape[1]
     out = np.zeros(n_rows)
-    offset = np.empty(dimension)
     for i in range(n_rows):
         total = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             if not include[j]:
                 continue
-            r2 = _separation(position, i, j, offset)
+            r2 = pair_distance2(position, i, j, dimension)
             if r2 <= 0.0 or r2 >= radius * radius:
                 continue
             total += (field[j] - field[i]) * radius / (r2 * np.sqrt(r2))
@@ -108,7 +98,6 @@ def higher_order_laplacian_rows(indptr, cols, position, radius, row_number, is_u
     """
     n_owned = indptr.shape[0] - 1
     dimension = position.shape[1]
-    offset = np.empty(dimension)
     radius2 = radius * radius
     n_rows = 0
     for i in range(n_owned):
@@ -125,7 +114,7 @@ def higher_order_laplacian_rows(indptr, cols, position, radius, row_number, is_u
                 j = cols[p]
                 if row_number[j] < 0 or not is_unknown[j]:
                     continue
-                r2 = _separation(position, i, j, offset)
+                r2 = pair_distance2(position, i, j, dimension)
                 if 0.0 < r2 < radius2:
                     length += 1
         row_ptr[k + 1] = row_ptr[k] + length
@@ -147,7 +136,7 @@ def higher_order_laplacian_rows(indptr, cols, position, radius, row_number, is_u
             j = cols[p]
             if row_number[j] < 0:
                 continue
-            r2 = _separation(position, i, j, offset)
+            r2 = pair_distance2(position, i, j, dimension)
             if r2 <= 0.0 or r2 >= radius2:
                 continue
             weight = coefficient * radius / (r2 * np.sqrt(r2))
