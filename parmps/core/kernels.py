@@ -301,9 +301,9 @@ def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradie
     initial lattice, the row becomes A_i^-1 times itself (Khayyer & Gotoh 2011's
     gradient correction): exact for a linear field on any particle arrangement
     for the sum over P_j - P_i; the Pmin shift's part (P_i - Pmin_i) d/n0
-    sum_j r_ij w / r^2 is only rescaled. Rows whose A_i has an eigenvalue below ``min_eigenvalue`` (a
-    truncated neighbourhood at a free surface or in a splash) are left as they
-    are. Returns how many rows were corrected. A_i is d×d: in 2D its eigenvalue
+    sum_j r_ij w / r^2 is only rescaled. Rows whose A_i has an eigenvalue below
+    ``min_eigenvalue`` (a truncated neighbourhood at a free surface or in a
+    splash) are left as they are. Returns how many rows were corrected. A_i is d×d: in 2D its eigenvalue
     and inverse in closed form, in 3D the eigenvalue by Jacobi rotations and the
     inverse by the adjugate.
     """
@@ -334,7 +334,8 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
             # The unit vector r_ij / r, component by component.
             approach = 0.0
             for k in range(d):
-                approach += (velocity[i, k] - velocity[j, k]) * (pair_component(position, i, j, k) / r)
+                approach += (velocity[i, k] - velocity[j, k]) * \
+                    (pair_component(position, i, j, k) / r)
             if approach <= 0.0:
                 continue
             share = 0.5 if moving[j] else 1.0
