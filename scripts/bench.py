@@ -2,11 +2,13 @@
 """Benchmark: the dam break at several sizes and rank counts, one JSON line per run.
 
     scripts/bench.py [--particles N ...] [--ranks R ...] [--steps S] [--warmup W]
+                     [--set SECTION.KEY=VALUE ...]
 
 Each run builds cases/dam_break.toml at the spacing that gives about N particles
 (fluid, walls and dummies), takes W warm-up steps (numba compilation, first
 AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
 us_per_particle_step and a breakdown of seconds by part (the slowest rank's).
+``--set`` applies case overrides as parmps does (a pressure scheme, say).
 Runs with more ranks than cores oversubscribe, which the line records.
 """
 
@@ -43,10 +45,12 @@ def spacing_for(target):
     return best
 
 
-def _case(spacing, steps=0):
+def _case(spacing, steps=0, overrides=()):
     from parmps import config, schema
     with open(CASE, "rb") as handle:
         raw = config.load_text(handle.read().decode())
+    for assignment in overrides:
+        config.apply_override(raw, assignment)
     if spacing is not None:
         raw["particles"]["spacing"] = spacing
     # A tank twice as tall as the column, as the run-up needs for 25 steps, keeps the
@@ -71,7 +75,7 @@ def worker(args):
     from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
     spacing = args.spacing
-    case = _case(spacing, steps=args.warmup + args.steps)
+    case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
     run = Simulation(case, "", comm, directory)
     timers = run.fluid.timers
@@ -104,6 +108,8 @@ def worker(args):
             "spacing": spacing,
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
+        if args.overrides:
+            line["set"] = list(args.overrides)
         print(json.dumps(line), flush=True)
         import shutil
         shutil.rmtree(directory, ignore_errors=True)
@@ -115,6 +121,8 @@ def main():
     parser.add_argument("--ranks", type=int, nargs="+", default=[1])
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--set", action="append", default=[], dest="overrides",
+                        metavar="SECTION.KEY=VALUE", help="a case override, as parmps --set")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--spacing", type=float, help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -128,6 +136,7 @@ def main():
         for ranks in args.ranks:
             argv = [sys.executable, os.path.abspath(__file__), "--worker", "--spacing",
                     repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup)]
+            argv += [word for override in args.overrides for word in ("--set", override)]
             command = mpirun_command(ranks, argv) if ranks > 1 else argv
             result = subprocess.run(command, capture_output=True, text=True,
                                     env=launch_environment(), cwd=ROOT)

@@ -17,7 +17,7 @@ from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, SOLID, WALL, Particles
 from parmps.errors import CaseError
 from parmps.fluid.constants import MPSConstants
-from parmps.fluid.schemes import GRADIENTS, SOURCES, registered, scheme_class
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, registered, scheme_class
 
 PACKAGE = Path(parmps.__file__).parent
 
@@ -100,12 +100,17 @@ def test_every_module_imports_without_side_effects():
 
 def test_every_registered_scheme_loads_and_declares_its_settings():
     assert set(SOURCES) >= {"density", "mixed"} and set(GRADIENTS) >= {"minimum", "corrected"}
-    assert not set(SOURCES) & set(GRADIENTS)  # one [mps.<name>] table each
+    assert set(SOURCES) >= {"density_rate", "compensated_rate", "density_acceleration"}
+    assert set(LAPLACIANS) >= {"standard", "higher_order"}
+    # one [mps.<name>] table each
+    names = [*SOURCES, *LAPLACIANS, *GRADIENTS]
+    assert len(set(names)) == len(names)
     for name, scheme in registered():
         assert isinstance(scheme.KEYS, dict)
-        assert hasattr(scheme, "rhs") or hasattr(scheme, "gradient"), name
+        assert (hasattr(scheme, "rhs") or hasattr(scheme, "rows")
+                or hasattr(scheme, "gradient")), name
     case = _validated()
-    for name in (*SOURCES, *GRADIENTS):
+    for name in names:
         assert isinstance(case["mps"][name], dict)
 
 

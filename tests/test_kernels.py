@@ -145,7 +145,8 @@ def test_poisson_rows_match_reference_and_are_symmetric(scene):
     unknown_row = np.full(n, -1, np.int64)
     unknown_row[unknown] = row_number[unknown]
     row_ptr, columns, values = kernels.poisson_rows(indptr, cols, position, radius, row_number,
-                                                    unknown.astype(np.int8), 860.0, 0.45, 7.0)
+                                                    unknown.astype(np.int8), 860.0, 0.45, 7.0,
+                                                    False)
     expected = reference_rows(pairs.rows, cols, pairs.weight(radius), unknown, unknown_row,
                               is_dummy, 860.0, 0.45)
     for i in np.flatnonzero(~is_dummy & ~unknown):

@@ -270,10 +270,11 @@ def test_hl_rows_follow_the_poisson_rows_contract():
     indptr, cols = pair_list(position, radius + 0.3 * SPACING)
     coefficient = khayyer_gotoh.higher_order_laplacian_coefficient(SPACING, radius, "paper")
     shift, dirichlet = 7.0, 123.0
-    row_ptr, columns, values = khayyer_gotoh.higher_order_laplacian_rows(
-        indptr, cols, position, radius, row_number, is_unknown, coefficient, shift, dirichlet)
+    row_ptr, columns, values = kernels.poisson_rows(
+        indptr, cols, position, radius, row_number, is_unknown, coefficient, shift, dirichlet,
+        True)
     standard = kernels.poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                                    1.0, shift, dirichlet)
+                                    1.0, shift, dirichlet, False)
     # Same sparsity as the standard rows: both keep pairs with 0 < r < re.
     assert np.array_equal(row_ptr, standard[0]) and np.array_equal(columns, standard[1])
     size = len(row_ptr) - 1
@@ -376,3 +377,126 @@ def test_parmps_gradient_correction_is_the_papers():
     rows = np.flatnonzero(interior(position, 3 * SPACING, side=16))
     np.testing.assert_allclose(gradient[rows], corrected_gradient_paper(
         position, pressure, has_pressure, radius, n0, rows), rtol=1e-10, atol=1e-8)
+
+
+# ------------------------------------------------------ registered schemes ----
+
+def _constants(re_number_density=2.3, re_laplacian=3.1):
+    from parmps.fluid.constants import MPSConstants
+    n0, _ = reference_values(SPACING, re_number_density * SPACING, 2)
+    n0_laplacian, lambda0 = reference_values(SPACING, re_laplacian * SPACING, 2)
+    from parmps.core.lattice import neighbour_count_reference
+    return MPSConstants(dimension=2, spacing=SPACING,
+                        re_number_density=re_number_density * SPACING,
+                        re_laplacian=re_laplacian * SPACING,
+                        search_radius=(re_laplacian + 0.3) * SPACING, n0=n0,
+                        n0_laplacian=n0_laplacian, lambda0=lambda0,
+                        neighbour_count0=neighbour_count_reference(
+                            SPACING, re_number_density * SPACING, 2),
+                        density=DENSITY, viscosity=1e-6)
+
+
+def _step(position, velocity, position_star, velocity_star, constants, dt=DT):
+    from parmps.fluid.projection import PressureStep
+    n = len(position)
+    indptr, cols = pair_list(position, constants.search_radius)
+    density_star, _ = kernels.number_density(indptr, cols, position_star,
+                                             constants.re_number_density, n)
+    inside = np.flatnonzero(interior(position, 4 * SPACING))
+    return PressureStep(dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
+                        velocity=velocity, position_star=position_star,
+                        velocity_star=velocity_star, number_density=density_star,
+                        unknown_index=inside)
+
+
+def test_lattice_normalised_hs_is_the_divergence_source_for_a_linear_field():
+    """u = a r on the lattice: the "lattice" HS source is -rho div u / dt = -rho 2a/dt
+    exactly (the paper's is (n0 + N)/(d n0) = 1.67 times that at 2.3 l0)."""
+    from parmps.fluid.schemes.rate import DensityRateSource
+    constants = _constants()
+    position = lattice()
+    a = 0.3
+    velocity = a * (position - position.mean(axis=0))
+    step = _step(position, velocity, position, velocity, constants)
+    lattice_source = DensityRateSource({"normalisation": "lattice"}, constants).rhs(step)
+    np.testing.assert_allclose(lattice_source, -DENSITY * 2 * a / DT, rtol=1e-12)
+    paper = DensityRateSource({"normalisation": "paper"}, constants).rhs(step)
+    factor = (constants.n0 + constants.neighbour_count0) / (2 * constants.n0)
+    np.testing.assert_allclose(paper, factor * lattice_source, rtol=1e-12)
+    assert abs(factor - 1.6718) < 1e-4
+
+
+def test_compensated_rate_adds_ecs_at_the_start_of_the_step():
+    from parmps.fluid.schemes.rate import CompensatedRateSource, DensityRateSource
+    constants = _constants()
+    rng = np.random.default_rng(3)
+    position = lattice(JITTER, seed=2)
+    velocity = rng.normal(0, 0.05, position.shape)
+    position_star = position + DT * velocity
+    step = _step(position, velocity, position_star, velocity, constants)
+    settings = {"normalisation": "paper"}
+    got = CompensatedRateSource(settings, constants).rhs(step)
+    index = step.unknown_index
+    density_k, _ = kernels.number_density(step.indptr, step.cols, position,
+                                          constants.re_number_density, len(position))
+    rate_k = khayyer_gotoh.number_density_rate(step.indptr, step.cols, position, velocity,
+                                               constants.re_number_density, len(position))
+    expected = (DensityRateSource(settings, constants).rhs(step)
+                + khayyer_gotoh.error_compensating_source(density_k[index], rate_k[index],
+                                                          DENSITY, constants.n0, DT))
+    np.testing.assert_allclose(got, expected, rtol=1e-12)
+    assert np.abs(got - DensityRateSource(settings, constants).rhs(step)).max() > 0
+
+
+def test_density_acceleration_takes_the_previous_density_one_step_back():
+    """n^{k-1} at r^k - dt u^k: for a particle set that moved by dt u^k from r^{k-1},
+    the source equals the second difference over the three actual arrangements."""
+    from parmps.fluid.schemes.kondo_koshizuka import DensityAccelerationSource
+    constants = _constants()
+    rng = np.random.default_rng(5)
+    previous = lattice(JITTER, seed=4)
+    velocity = rng.normal(0, 0.3, previous.shape)
+    position = previous + DT * velocity
+    position_star = position + DT * (velocity + rng.normal(0, 0.3, previous.shape))
+    step = _step(position, velocity, position_star, velocity, constants)
+    got = DensityAccelerationSource({"relaxation": 0.01}, constants).rhs(step)
+    n = len(position)
+    index = step.unknown_index
+
+    def density(x):
+        return kernels.number_density(step.indptr, step.cols, x,
+                                      constants.re_number_density, n)[0][index]
+
+    expected = (DENSITY / DT ** 2) * ((density(position_star) - 2 * density(position)
+                                       + density(previous))
+                                      + 0.01 * (density(position) - constants.n0)) / constants.n0
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-9 * np.abs(expected).max())
+    # At rest on the lattice every term vanishes.
+    rest = _step(lattice(), np.zeros_like(previous), lattice(), np.zeros_like(previous),
+                 constants)
+    assert np.abs(DensityAccelerationSource({"relaxation": 0.01}, constants).rhs(rest)).max() \
+        < 1e-6 * DENSITY / DT ** 2
+
+
+@pytest.mark.parametrize("normalisation", ["paper", "lattice"])
+def test_higher_order_laplacian_rows_are_exact_or_paper_scaled_for_a_quadratic(normalisation):
+    """The registered HL scheme's matrix (minus the Laplacian) applied to |r|^2: an
+    interior lattice row of the "lattice" operator gives -2d exactly, the paper's
+    3(n0 + N)/(4 n0) times that (docs/schemes.md)."""
+    from parmps.fluid.schemes.laplacian import HigherOrderLaplacian
+    constants = _constants()
+    position = lattice()
+    n = len(position)
+    indptr, cols = pair_list(position, constants.search_radius)
+    row_number = np.arange(n, dtype=np.int64)
+    is_unknown = np.ones(n, np.int8)
+    laplacian = HigherOrderLaplacian({"normalisation": normalisation}, constants)
+    row_ptr, columns, values = laplacian.rows(indptr, cols, position, row_number, is_unknown,
+                                              0.0)
+    field = (position ** 2).sum(axis=1)
+    applied = np.array([values[row_ptr[i]:row_ptr[i + 1]]
+                        @ field[columns[row_ptr[i]:row_ptr[i + 1]]] for i in range(n)])
+    inside = interior(position, 4 * SPACING)
+    n0, count, inverse, _ = khayyer_gotoh.lattice_sums(SPACING, constants.re_laplacian)
+    factor = 1.0 if normalisation == "lattice" else 3 * (n0 + count) / (4 * n0)
+    np.testing.assert_allclose(applied[inside], -4.0 * factor, rtol=1e-10)

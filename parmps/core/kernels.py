@@ -364,8 +364,19 @@ def collision_change(indptr, cols, position, velocity, moving, distance_limit, r
 # --- pressure matrix --------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")
+def _laplacian_weight(r2, radius, inverse_cube):
+    # The standard MPS weight re/r - 1, or Khayyer & Gotoh's (2010) higher-order
+    # one re/r^3, for 0 < r < re; 0 outside.
+    if r2 <= 0.0 or r2 >= radius * radius:
+        return 0.0
+    if inverse_cube:
+        return radius / (r2 * np.sqrt(r2))
+    return radius / np.sqrt(r2) - 1.0
+
+
+@numba.njit(cache=True, inline="always")
 def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
-                  diagonal_shift, dirichlet_diagonal, d):
+                  diagonal_shift, dirichlet_diagonal, inverse_cube, d):
     n_owned = indptr.shape[0] - 1
     n_rows = 0
     for i in range(n_owned):
@@ -382,7 +393,8 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
                 j = cols[p]
                 if row_number[j] < 0 or not is_unknown[j]:
                     continue
-                if _weight(np.sqrt(pair_distance2(position, i, j, d)), radius) > 0.0:
+                if _laplacian_weight(pair_distance2(position, i, j, d), radius,
+                                     inverse_cube) > 0.0:
                     length += 1
         row_ptr[k + 1] = row_ptr[k] + length
         k += 1
@@ -403,7 +415,7 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
             j = cols[p]
             if row_number[j] < 0:
                 continue
-            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
+            w = _laplacian_weight(pair_distance2(position, i, j, d), radius, inverse_cube)
             if w <= 0.0:
                 continue
             diagonal += coefficient * w
@@ -418,7 +430,7 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
 
 @numba.njit(cache=True)
 def poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
-                 diagonal_shift, dirichlet_diagonal):
+                 diagonal_shift, dirichlet_diagonal, inverse_cube):
     """CSR rows of the pressure Poisson matrix, one per owned particle with a pressure.
 
     ``row_number`` is the global row of every local particle (-1 for dummies,
@@ -428,11 +440,14 @@ def poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffic
     Dirichlet neighbour has P_j = 0 and adds to the diagonal only. A Dirichlet
     row is ``dirichlet_diagonal`` * P_i = 0, decoupled, so the matrix keeps one
     size while particles reach and leave the surface and a preconditioner can
-    be reused across steps. Diagonal first in each row.
+    be reused across steps. Diagonal first in each row. The weight is the
+    standard MPS weight w_ij = re/r - 1, or with ``inverse_cube`` Khayyer &
+    Gotoh's higher-order Laplacian weight re/r^3 (docs/schemes.md, HL); both
+    keep the pairs with 0 < r < re, so the sparsity is the same.
     """
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
         return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                             coefficient, diagonal_shift, dirichlet_diagonal, 2)
+                             coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube, 2)
     return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                         coefficient, diagonal_shift, dirichlet_diagonal, 3)
+                         coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube, 3)

@@ -18,7 +18,7 @@ from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
-from parmps.fluid.schemes import GRADIENTS, SOURCES, scheme_class
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, scheme_class
 
 log = logging.getLogger(__name__)
 
@@ -47,8 +47,8 @@ class Timers:
 class PressureStep:
     """What a source scheme may read to make the PPE's right-hand side.
 
-    ``position`` is the start of the step (owned, then ghosts), ``position_star``
-    and ``velocity_star`` the prediction; ``number_density`` is n* of the owned
+    ``position`` and ``velocity`` are the start of the step (owned, then
+    ghosts), ``position_star`` and ``velocity_star`` the prediction; ``number_density`` is n* of the owned
     particles and ``unknown_index`` the owned particles whose rows are unknowns.
     """
 
@@ -57,6 +57,7 @@ class PressureStep:
     indptr: np.ndarray
     cols: np.ndarray
     position: np.ndarray
+    velocity: np.ndarray
     position_star: np.ndarray
     velocity_star: np.ndarray
     number_density: np.ndarray
@@ -80,6 +81,8 @@ class FluidSolver:
         self.constants = constants
         mps = case["mps"]
         self.source = scheme_class(SOURCES, mps["source"])(mps[mps["source"]], constants)
+        self.laplacian = scheme_class(LAPLACIANS, mps["laplacian"])(mps[mps["laplacian"]],
+                                                                    constants)
         self.gradient = scheme_class(GRADIENTS, mps["gradient"])(mps[mps["gradient"]],
                                                                  constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
@@ -162,15 +165,14 @@ class FluidSolver:
         decomposition.refresh([row_number, is_unknown])
 
         timers.start("assembly")
-        csr_indptr, columns, values = kernels.poisson_rows(
-            indptr, cols, position_star, c.re_laplacian, row_number, is_unknown,
-            c.laplacian_coefficient, c.density * self.compressibility / dt ** 2,
-            c.laplacian_coefficient * c.n0_laplacian)
+        csr_indptr, columns, values = self.laplacian.rows(
+            indptr, cols, position_star, row_number, is_unknown,
+            c.density * self.compressibility / dt ** 2)
         rhs = np.zeros(len(pressure_index))
         in_rows = unknown[pressure_index]
         rhs[in_rows] = self.source.rhs(PressureStep(
             dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
-            position_star=position_star, velocity_star=velocity_star,
+            velocity=velocity, position_star=position_star, velocity_star=velocity_star,
             number_density=number_density, unknown_index=pressure_index[in_rows]))
 
         timers.start("solve")

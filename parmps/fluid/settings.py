@@ -2,7 +2,7 @@
 
 from parmps.config import Key, Section
 from parmps.errors import CaseError
-from parmps.fluid.schemes import GRADIENTS, SOURCES, registered
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, registered
 
 
 def _mps_section():
@@ -17,6 +17,8 @@ def _mps_section():
                                        "full-lattice count (0 disables)"),
         "source": Key("str", "density", choices=tuple(SOURCES),
                       doc="the PPE source scheme (settings in [mps.<name>])"),
+        "laplacian": Key("str", "standard", choices=tuple(LAPLACIANS),
+                         doc="the PPE's Laplacian (settings in [mps.<name>])"),
         "gradient": Key("str", "minimum", choices=tuple(GRADIENTS),
                         doc="the pressure-gradient scheme (settings in [mps.<name>])"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),

@@ -165,7 +165,10 @@ def hydrostatic_pressure_error(path, case, settle_time):
     - ``bottom_std``, ``bottom_series``, ``bottom_times``: the bottom row's mean error
       frame by frame and its standard deviation over time (the pressure noise);
     - ``noise``: RMS over particles and frames of the instantaneous error;
-    - ``speed_rms``: RMS fluid speed in the last frame (the surface "boiling").
+    - ``speed_rms``: RMS fluid speed in the last frame (the surface "boiling");
+    - ``height_drift``: the column's mean height 2 <y - floor> over the fluid,
+      averaged over the frames after ``settle_time``, relative to its value in
+      the first frame, minus 1 (positive: the column has expanded).
     """
     lower, upper = fluid_extent(case)
     surface, depth = upper[1], upper[1] - lower[1]
@@ -187,13 +190,20 @@ def hydrostatic_pressure_error(path, case, settle_time):
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
     speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
+    floor = lower[1]
+
+    def column_height(frame):
+        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, 1] - floor))
+
+    height = np.mean([column_height(f) for f in selected]) / column_height(first) - 1.0
     return {"bottom": float(mean_error[bottom].mean()),
             "rms": float(np.sqrt(np.mean(mean_error[interior] ** 2))),
             "bottom_std": float(np.std(series)),
             "bottom_series": series.tolist(),
             "bottom_times": [float(f["time"]) for f in selected],
             "noise": float(np.mean(np.sqrt(np.mean(errors[:, interior] ** 2, axis=1)))),
-            "speed_rms": float(np.sqrt(np.mean(speed ** 2)))}
+            "speed_rms": float(np.sqrt(np.mean(speed ** 2))),
+            "height_drift": float(height)}
 
 
 def escaped(path, lower, upper):

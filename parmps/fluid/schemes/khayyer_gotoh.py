@@ -64,7 +64,8 @@ def higher_order_laplacian_sum(indptr, cols, position, field, include, radius, n
     Times the HL coefficient (``higher_order_laplacian_coefficient``) this is
     Khayyer & Gotoh's (2010) higher-order Laplacian of a scalar field; with
     ``include`` = "carries a pressure" it is minus the action of the matrix that
-    ``higher_order_laplacian_rows`` builds, for rows whose neighbours are all unknowns.
+    ``kernels.poisson_rows(..., inverse_cube=True)`` builds, for rows whose
+    neighbours are all unknowns.
     """
     dimension = position.shape[1]
     out = np.zeros(n_rows)
@@ -80,74 +81,6 @@ def higher_order_laplacian_sum(indptr, cols, position, field, include, radius, n
             total += (field[j] - field[i]) * radius / (r2 * np.sqrt(r2))
         out[i] = total
     return out
-
-
-@numba.njit(cache=True)
-def higher_order_laplacian_rows(indptr, cols, position, radius, row_number, is_unknown,
-                                coefficient, diagonal_shift, dirichlet_diagonal):
-    """CSR rows of the pressure matrix with the HL weight re/|r_ij|^3 in place of w_ij.
-
-    Same contract as :func:`parmps.core.kernels.poisson_rows`: one row per owned
-    particle with ``row_number >= 0`` (dummies carry no pressure and get none;
-    as columns they are skipped too); ``is_unknown`` false makes a decoupled
-    Dirichlet row ``dirichlet_diagonal * P_i = 0``. An unknown row i has the
-    diagonal ``coefficient * sum_j K_ij + diagonal_shift`` over neighbours j within
-    ``radius`` that carry a pressure, and ``-coefficient * K_ij`` for those that are
-    unknowns (a Dirichlet neighbour has P_j = 0 and adds to the diagonal only),
-    with K_ij = re/|r_ij|^3. Diagonal first in each row. Symmetric, because K is.
-    """
-    n_owned = indptr.shape[0] - 1
-    dimension = position.shape[1]
-    radius2 = radius * radius
-    n_rows = 0
-    for i in range(n_owned):
-        if row_number[i] >= 0:
-            n_rows += 1
-    row_ptr = np.zeros(n_rows + 1, np.int64)
-    k = 0
-    for i in range(n_owned):
-        if row_number[i] < 0:
-            continue
-        length = 1
-        if is_unknown[i]:
-            for p in range(indptr[i], indptr[i + 1]):
-                j = cols[p]
-                if row_number[j] < 0 or not is_unknown[j]:
-                    continue
-                r2 = pair_distance2(position, i, j, dimension)
-                if 0.0 < r2 < radius2:
-                    length += 1
-        row_ptr[k + 1] = row_ptr[k] + length
-        k += 1
-    columns = np.empty(row_ptr[n_rows], np.int64)
-    values = np.empty(row_ptr[n_rows])
-    k = 0
-    for i in range(n_owned):
-        if row_number[i] < 0:
-            continue
-        columns[row_ptr[k]] = row_number[i]
-        if not is_unknown[i]:
-            values[row_ptr[k]] = dirichlet_diagonal
-            k += 1
-            continue
-        place = row_ptr[k] + 1
-        diagonal = diagonal_shift
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if row_number[j] < 0:
-                continue
-            r2 = pair_distance2(position, i, j, dimension)
-            if r2 <= 0.0 or r2 >= radius2:
-                continue
-            weight = coefficient * radius / (r2 * np.sqrt(r2))
-            diagonal += weight
-            if is_unknown[j]:
-                columns[place] = row_number[j]
-                values[place] = -weight
-                place += 1
-        values[row_ptr[k]] = diagonal
-        k += 1
-    return row_ptr, columns, values
 
 
 def lattice_sums(spacing, radius, dimension=2):

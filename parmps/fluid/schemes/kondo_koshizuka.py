@@ -22,6 +22,9 @@ relaxation gamma: rho/dt^2 gamma (n - n0)/n0.
 
 import numpy as np
 
+from parmps.config import Key
+from parmps.core import kernels
+
 
 def source_term(number_density_current, number_density_predicted, n0, density, dt, relaxation):
     """b_i = rho/dt^2 [(n*_i - n^k_i) + gamma (n^k_i - n0)] / n0."""
@@ -42,3 +45,34 @@ def second_difference_source_term(number_density_previous, number_density_curren
     predicted = np.asarray(number_density_predicted)
     return (density / dt ** 2) * ((predicted - 2.0 * current + previous)
                                   + relaxation * (current - n0)) / n0
+
+
+class DensityAccelerationSource:
+    """The second-difference reading, registered as ``density_acceleration``.
+
+    n^{k-1} is the number density one step back along the current velocities,
+    at r^k - dt u^k: the step moves every fluid particle by exactly dt u^{k}
+    (the corrected velocity), so with a constant dt this is the previous step's
+    start, and with a changing dt it is still the backward point of a central
+    second difference over dt. That needs no state carried between steps, so
+    the scheme survives migration and restart unchanged.
+    """
+
+    KEYS = {"relaxation": Key("float", 0.01, gt=0.0, le=1.0,
+                              doc="gamma of the pull back to n0")}
+
+    def __init__(self, settings, constants):
+        self.relaxation = settings["relaxation"]
+        self.constants = constants
+
+    def rhs(self, step):
+        c = self.constants
+        index = step.unknown_index
+        current, _ = kernels.number_density(step.indptr, step.cols, step.position,
+                                            c.re_number_density, step.n_owned)
+        previous, _ = kernels.number_density(step.indptr, step.cols,
+                                             step.position - step.dt * step.velocity,
+                                             c.re_number_density, step.n_owned)
+        return second_difference_source_term(previous[index], current[index],
+                                             step.number_density[index], c.n0, c.density,
+                                             step.dt, self.relaxation)

@@ -1,0 +1,262 @@
+#!/usr/bin/env python3
+"""The pressure schemes side by side: still tank, Lobovsky dam break, coupled scenes, cost.
+
+    scripts/compare_schemes.py [--schemes LABEL ...] [--parts PART ...]
+                               [--lobovsky-spacing L0] [--ranks N] [--out DIR]
+
+Each scheme is a set of case overrides (SCHEMES below). Each part runs the
+scheme through one measurement and appends one JSON line to DIR/results.jsonl
+(default out/schemes/); a scheme and part already there is not run again, so an
+interrupted comparison continues where it stopped. The parts:
+
+- ``tank1cm``, ``tank5mm``: cases/hydrostatic.toml for 2 s at l0 = 1 cm and
+  5 mm, measured after 0.5 s as validation/hydrostatic/ says (RMS, bottom mean,
+  bottom noise, column height drift; relative to rho g H);
+- ``lobovsky``: cases/dam_break_lobovsky.toml to t sqrt(g/H) = 7 at
+  --lobovsky-spacing, P1-P3 arrival and mean error (validation/dam_break_lobovsky/);
+- ``box``: cases/box_in_flow.toml to 0.6 s: the cup's depth (bend) and area error;
+- ``membrane``: cases/membrane_tube.toml to 1.5 s: the mid-point's largest
+  inward and outward travel and the tube's area error;
+- ``cost``: scripts/bench.py at about 10k particles on 1 rank, us per particle-step.
+
+Then it prints the table (markdown) of every line in the file.
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+# label -> case overrides. "MPS" is the original scheme; Khayyer & Gotoh's HS is
+# the density_rate source, ECS the compensated_rate one, HL the higher_order
+# Laplacian, GC the corrected gradient; KK Kondo & Koshizuka's second difference.
+SCHEMES = {
+    "MPS": [],
+    "MPS + GC": ['mps.gradient="corrected"'],
+    "mixed": ['mps.source="mixed"'],
+    "mixed + GC": ['mps.source="mixed"', 'mps.gradient="corrected"'],
+    "HS": ['mps.source="density_rate"'],
+    "HS + HL": ['mps.source="density_rate"', 'mps.laplacian="higher_order"'],
+    "HS (lattice) + GC": ['mps.source="density_rate"',
+                          'mps.density_rate.normalisation="lattice"',
+                          'mps.gradient="corrected"'],
+    "HS + ECS + HL + GC": ['mps.source="compensated_rate"', 'mps.laplacian="higher_order"',
+                           'mps.gradient="corrected"'],
+    "HS + ECS (lattice) + GC": ['mps.source="compensated_rate"',
+                                'mps.compensated_rate.normalisation="lattice"',
+                                'mps.gradient="corrected"'],
+    "KK": ['mps.source="density_acceleration"'],
+    "KK + GC": ['mps.source="density_acceleration"', 'mps.gradient="corrected"'],
+}
+PARTS = ("tank1cm", "tank5mm", "lobovsky", "box", "membrane", "cost")
+
+
+def run_parmps(case, directory, overrides, end_time, ranks, extra=()):
+    """Run parmps; returns (exit status, result path, the command as typed)."""
+    command = [sys.executable, "-m", "parmps", os.path.join(ROOT, case), "-o", directory,
+               "--end-time", repr(end_time)]
+    for override in list(overrides) + list(extra):
+        command += ["--set", override]
+    environment = None
+    if ranks > 1:
+        from parmps.parallel.mpi import launch_environment, mpirun_command
+        command = mpirun_command(ranks, command)
+        environment = launch_environment()
+    status = subprocess.run(command, env=environment, cwd=ROOT,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            text=True).returncode
+    return status, os.path.join(directory, "result.h5")
+
+
+def summary(result):
+    from parmps.tools import analysis
+    return analysis.run_summary(result) if os.path.isfile(result) else {}
+
+
+def tank(label, overrides, spacing, directory, ranks):
+    from parmps import validation
+    check = validation.load("hydrostatic")
+    status, result = run_parmps(check.case_path, directory, overrides, check.run["end_time"],
+                                ranks, [f"particles.spacing={spacing!r}",
+                                        "time.output_interval=0.01"])
+    record = summary(result)
+    record["status"] = status
+    if status == 0:
+        measured = check.measure(result)
+        record.update({key: measured[key] for key in
+                       ("rms", "bottom", "bottom_std", "height_drift", "speed_rms")})
+    return record
+
+
+def lobovsky(label, overrides, spacing, directory, ranks):
+    from parmps import validation
+    from parmps.tools import analysis
+    check = validation.load("dam_break_lobovsky")
+    case = check.case([f"particles.spacing={spacing!r}"])
+    lower, upper = analysis.fluid_extent(case)
+    end = check.run["until"] / math.sqrt(analysis.gravity(case) / (upper[1] - lower[1]))
+    status, result = run_parmps(check.case_path, directory, overrides, end, ranks,
+                                [f"particles.spacing={spacing!r}", "output.frames=false"])
+    record = summary(result)
+    record["status"] = status
+    if os.path.isfile(result):
+        measured = check.measure(result)
+        for name in check.tolerance["judged"]:
+            row = measured[name]
+            record[name] = {"arrival": row["arrival_error"], "mean": row["mean_error"],
+                            "peak": row["peak"], "peak_measured": row["peak_measured"]}
+    return record
+
+
+def box(label, overrides, spacing, directory, ranks):
+    import h5py
+    import numpy as np
+    from parmps.tools import analysis
+    status, result = run_parmps("cases/box_in_flow.toml", directory, overrides, 0.6, ranks,
+                                ["time.output_interval=0.6"])
+    record = summary(result)
+    record["status"] = status
+    if os.path.isfile(result):
+        case = analysis.result_case(result)
+        record["volume_error"] = analysis.volume_error(result, case)["volume_error"]
+        with h5py.File(result, "r") as handle:
+            last = sorted(handle["frames"])[-1]
+            nodes = handle["frames"][last]["solids/box/position"][()]
+        x = nodes[:45, 0].reshape(9, 5)
+        record["bend"] = float(-(x[4].mean() - 0.5 * (x[0].mean() + x[-1].mean())))
+        record["bend_time"] = float(np.round(case["time"]["end"], 6))
+    return record
+
+
+def membrane(label, overrides, spacing, directory, ranks):
+    import h5py
+    import numpy as np
+    from parmps.tools import analysis
+    status, result = run_parmps("cases/membrane_tube.toml", directory, overrides, 1.5, ranks,
+                                ["time.output_interval=0.01"])
+    record = summary(result)
+    record["status"] = status
+    if os.path.isfile(result):
+        case = analysis.result_case(result)
+        record["volume_error"] = analysis.volume_error(result, case)["volume_error"]
+        middle = []
+        with h5py.File(result, "r") as handle:
+            for name in sorted(handle["frames"]):
+                middle.append(handle["frames"][name]["solids/membrane/position"][19, 1])
+        travel = np.asarray(middle) - middle[0]
+        record["inward"] = float(-travel.min())
+        record["outward"] = float(travel.max())
+    return record
+
+
+def cost(label, overrides, spacing, directory, ranks):
+    command = [sys.executable, os.path.join(ROOT, "scripts", "bench.py"), "--particles",
+               "10000", "--steps", "20", "--warmup", "5"]
+    command += [word for override in overrides for word in ("--set", override)]
+    output = subprocess.run(command, capture_output=True, text=True, cwd=ROOT).stdout
+    lines = [json.loads(line) for line in output.splitlines() if line.startswith("{")]
+    if not lines or "error" in lines[-1]:
+        return {"status": 1}
+    return {"status": 0, "us_per_particle_step": lines[-1]["us_per_particle_step"],
+            "particles": lines[-1]["particles"]}
+
+
+MEASURE = {"tank1cm": lambda *a: tank(*a[:2], 0.01, *a[3:]),
+           "tank5mm": lambda *a: tank(*a[:2], 0.005, *a[3:]),
+           "lobovsky": lobovsky, "box": box, "membrane": membrane, "cost": cost}
+
+
+def percent(value, digits=1):
+    return "—" if value is None else f"{100 * value:+.{digits}f}"
+
+
+def table(records):
+    """Markdown table: one row per scheme, the parts' figures side by side."""
+    by_scheme = {}
+    for record in records:
+        by_scheme.setdefault(record["scheme"], {})[record["part"]] = record
+    lines = ["| scheme | tank 1 cm: RMS / bottom / noise / drift (%) | tank 5 mm: RMS / bottom / "
+             "noise / drift (%) | Lobovsky P1/P2/P3 arrival | P1/P2/P3 mean (%) | "
+             "box bend (mm), area error | membrane in/out (mm) | us per particle-step |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+
+    def tank_cell(record):
+        if record is None:
+            return "—"
+        if record.get("status"):
+            return f"stopped at {record.get('end', 0):.2f} s"
+        return (f"{100 * record['rms']:.2f} / {percent(record['bottom'], 2)} / "
+                f"{100 * record['bottom_std']:.1f} / {percent(record['height_drift'], 2)}")
+
+    for label in SCHEMES:
+        parts = by_scheme.get(label)
+        if not parts:
+            continue
+        lob = parts.get("lobovsky")
+        if lob and "P1" in lob:
+            stopped = "" if lob["status"] == 0 else f" (stopped at {lob.get('end', 0):.2f} s)"
+            arrival = " / ".join(f"{lob[n]['arrival']:+.3f}" for n in ("P1", "P2", "P3"))
+            mean = " / ".join(percent(lob[n]["mean"], 0) for n in ("P1", "P2", "P3")) + stopped
+        else:
+            arrival = mean = "—"
+        b = parts.get("box")
+        box_cell = ("—" if b is None or "bend" not in b else
+                    f"{1000 * b['bend']:.1f}, {b['volume_error']:.1e}"
+                    + ("" if b["status"] == 0 else f" (stopped at {b.get('end', 0):.2f} s)"))
+        m = parts.get("membrane")
+        membrane_cell = ("—" if m is None or "inward" not in m else
+                         f"{1000 * m['inward']:.1f} / {1000 * m['outward']:.1f}"
+                         + ("" if m["status"] == 0 else f" (stopped at {m.get('end', 0):.2f} s)"))
+        c = parts.get("cost")
+        cost_cell = "—" if c is None or c.get("status") else f"{c['us_per_particle_step']:.2f}"
+        lines.append(f"| {label} | {tank_cell(parts.get('tank1cm'))} | "
+                     f"{tank_cell(parts.get('tank5mm'))} | {arrival} | {mean} | {box_cell} | "
+                     f"{membrane_cell} | {cost_cell} |")
+    return "\n".join(lines)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--schemes", nargs="+", default=list(SCHEMES), choices=list(SCHEMES),
+                        metavar="LABEL")
+    parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=PARTS)
+    parser.add_argument("--lobovsky-spacing", type=float, default=0.01)
+    parser.add_argument("--ranks", type=int, default=1)
+    parser.add_argument("--out", default=os.path.join(ROOT, "out", "schemes"))
+    parser.add_argument("--table", action="store_true", help="only print the table")
+    args = parser.parse_args()
+    os.makedirs(args.out, exist_ok=True)
+    store = os.path.join(args.out, "results.jsonl")
+    records = []
+    if os.path.isfile(store):
+        with open(store) as handle:
+            records = [json.loads(line) for line in handle if line.strip()]
+    done = {(r["scheme"], r["part"]) for r in records}
+    if not args.table:
+        for part in args.parts:
+            for label in args.schemes:
+                if (label, part) in done:
+                    continue
+                slug = "".join(ch if ch.isalnum() else "_" for ch in label)
+                directory = os.path.join(args.out, f"{part}_{slug}")
+                record = MEASURE[part](label, SCHEMES[label], args.lobovsky_spacing,
+                                       directory, args.ranks)
+                record.update({"scheme": label, "part": part, "set": SCHEMES[label],
+                               "ranks": args.ranks})
+                if part == "lobovsky":
+                    record["spacing"] = args.lobovsky_spacing
+                records.append(record)
+                with open(store, "a") as handle:
+                    handle.write(json.dumps(record) + "\n")
+                print(json.dumps(record), flush=True)
+    print(table(records))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
