@@ -155,8 +155,12 @@ def surge_front_error(path, case, reference, compare_until=3.0, delay_range=(0.0
 def hydrostatic_pressure_error(path, case, settle_time):
     """Pressure error of a still tank after ``settle_time``, relative to rho g H.
 
-    The water's floor, surface (so H), density and gravity come from ``case``. Each
-    particle's error is taken at its current depth in every frame. Returns a dict:
+    The water's floor, surface (so H), width, density, gravity and l0 come from
+    ``case``. Each particle's pressure is compared in every frame with the weight
+    of the water above it: rho g l0^d (N_above + 1/2) / W, N_above the fluid
+    particles higher than it and W the water's width (its horizontal area in
+    3D). That reference follows the column if it settles or expands, which
+    ``height_drift`` reports on its own. Returns a dict:
 
     - ``bottom``: the time-averaged error, mean over the initial bottom fluid row;
     - ``rms``: RMS over every fluid particle but the initial top row (where the
@@ -184,8 +188,21 @@ def hydrostatic_pressure_error(path, case, settle_time):
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
     interior = fluid & (y0 < surface - spacing)
     scale = density * g * depth
-    errors = np.array([(f["pressure"] - density * g * (surface - f["position"][:, 1])) / scale
-                       for f in selected])
+    width = float(np.prod(upper[:-1] - lower[:-1]))
+    particle_weight = density * g * spacing ** len(upper) / width
+
+    def weight_above(frame):
+        # Zero for every particle but the fluid, which is all the errors below read.
+        is_fluid = frame["kind"] == FLUID
+        height = frame["position"][:, -1]
+        above = np.zeros(len(height))
+        order = np.argsort(-height[is_fluid], kind="stable")
+        rank = np.empty(len(order))
+        rank[order] = np.arange(len(order))
+        above[is_fluid] = particle_weight * (rank + 0.5)
+        return above
+
+    errors = np.array([(f["pressure"] - weight_above(f)) / scale for f in selected])
     mean_error = errors.mean(axis=0)
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
