@@ -394,3 +394,42 @@ def test_bad_bodies_are_refused_with_one_line(name):
     with pytest.raises(CaseError, match=pattern) as info:
         check_bad(BASE + body)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("axial", [False, True], ids=["relative", "axial"])
+def test_compiled_network_forces_match_the_numpy_forms(axial):
+    """parmps.solids.mass_spring.kernels against the numpy statement of the same forces."""
+    from parmps.solids.mass_spring.body import damping_forces, spring_forces
+    from parmps.solids.mass_spring.elastic import axial_damping_forces
+    from parmps.solids.mass_spring.kernels import network_forces
+    body = lattice_body(damping=0.3, seed=1, speed=0.5)
+    rng = np.random.default_rng(2)
+    position = body.position + 1e-3 * rng.standard_normal(body.position.shape)
+    stiffness = body.stiffness * (1.0 + rng.random(len(body.springs)))
+    expected = spring_forces(position, body.springs, body.rest_length, stiffness) + (
+        axial_damping_forces(position, body.velocity, body.springs, body.damping) if axial
+        else damping_forces(body.velocity, body.springs, body.damping))
+    force = np.zeros_like(position)
+    network_forces(position, body.velocity, body.springs, body.rest_length, stiffness,
+                   body.damping, axial, force)
+    assert np.allclose(force, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+
+
+def test_held_force_substeps_match_the_general_loop():
+    """The compiled loop (no area constraint, no windowed load) against the general one."""
+    def body(gravity):
+        b = lattice_body(damping=0.05, constraint=False, seed=3, speed=0.2)
+        b.gravity = np.asarray(gravity)
+        b.fluid_force[:] = np.linspace(-1e-3, 1e-3, 2 * b.n_nodes).reshape(-1, 2)
+        return b
+    compiled, general = body((0.0, -9.81)), body((0.0, -9.81))
+    # A zero-force window load sends the general body down the Python loop.
+    general.load_field = np.zeros((1, general.n_nodes, 2))
+    general.load_start, general.load_end = np.zeros(1), np.ones(1)
+    general.load_ramp = np.zeros(1)
+    h = 0.5 * compiled.stability_limit()
+    for step in range(5):
+        assert compiled.advance(step * 20 * h, 20 * h, h) == 20
+        general.advance(step * 20 * h, 20 * h, h)
+    assert np.allclose(compiled.position, general.position, rtol=0, atol=1e-13)
+    assert np.allclose(compiled.velocity, general.velocity, rtol=1e-10, atol=1e-12)

@@ -276,6 +276,70 @@ def tip_trajectory(path, case):
     return np.array(times), np.array(ys)
 
 
+def clamped_plate_deflection(path, case, settle_time, body="plate"):
+    """Time-averaged mid-span deflection of a plate clamped at both ends under a water
+    column, against Euler-Bernoulli: w = q L^4 / (384 D), q = g (rho_f h + rho_s t).
+
+    Everything comes from ``case``: the plate is the lattice body named ``body``
+    (thickness t = (ny - 1) spacing, the rectangle between its outer nodes; E, nu, plane
+    and rho_s of its material, D = E2 t^3/12 with E2 = E/(1 - nu^2) in plane strain); its
+    span L lies between the innermost pinned columns on either side of its middle; the
+    water depth h is the fluid blocks' height; rho_f and g from the case. The deflection is
+    the mean downward displacement of the mid-span column of nodes, frame by frame,
+    averaged over the frames from ``settle_time`` on. Returns a dict: ``deflection``,
+    ``expected``, ``error`` (relative), ``amplitude`` (half the range of the averaged
+    frames), ``span``, ``load`` (q), ``bending_stiffness`` (D) and the series ``time`` and
+    ``series``.
+    """
+    import h5py
+
+    from parmps.solids.mass_spring.build import lattice_geometry, node_set
+    from parmps.solids.mass_spring.elastic import plane_modulus, REPRESENTABLE_POISSON
+
+    (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
+    nx, ny, spacing = spec["nx"], spec["ny"], spec["spacing"]
+    rest, _, _, _ = lattice_geometry(nx, ny, spacing, spec["lower"])
+    pinned = np.zeros(len(rest), bool)
+    if spec["pinned"] != "none":
+        pinned[node_set(body, spec["pinned"], rest, shape=(nx, ny))] = True
+    if spec["pinned_ids"]:
+        pinned[node_set(body, "ids", rest, ids=spec["pinned_ids"])] = True
+    x = rest[:, 0]
+    middle = 0.5 * (x.min() + x.max())
+    left, right = x[pinned & (x < middle)], x[pinned & (x > middle)]
+    if not len(left) or not len(right):
+        raise ValueError(f"body '{body}' is not pinned on both sides of its middle")
+    clamp_left, clamp_right = left.max(), right.min()
+    span = clamp_right - clamp_left
+    centre = 0.5 * (clamp_left + clamp_right)
+    column = np.flatnonzero(np.isclose(x, x[np.argmin(np.abs(x - centre))]))
+    thickness = (ny - 1) * spacing
+    poisson = spec["poisson_ratio"]
+    if poisson is None:
+        poisson = REPRESENTABLE_POISSON[spec["plane"]]
+    modulus, _ = plane_modulus(spec["youngs_modulus"], poisson, spec["plane"])
+    bending = modulus * thickness ** 3 / 12.0
+    lower, upper = fluid_extent(case)
+    g = gravity(case)
+    load = g * (case["fluid"]["density"] * (upper[1] - lower[1]) + spec["density"] * thickness)
+    expected = load * span ** 4 / (384.0 * bending)
+    times, deflection = [], []
+    with h5py.File(path, "r") as handle:
+        for frame in sorted(handle["frames"]):
+            group = handle["frames"][frame]
+            times.append(group.attrs["time"])
+            y = group[f"solids/{body}/position"][column, 1]
+            deflection.append(-float(np.mean(y - rest[column, 1])))
+    times, deflection = np.array(times), np.array(deflection)
+    mean = window_mean(times, deflection, settle_time, times[-1])
+    settled = deflection[times >= settle_time]
+    return {"deflection": mean, "expected": float(expected),
+            "error": float(mean / expected - 1.0),
+            "amplitude": float(0.5 * np.ptp(settled)) if len(settled) else math.nan,
+            "span": float(span), "load": float(load), "bending_stiffness": float(bending),
+            "time": times, "series": deflection}
+
+
 def lattice_area(body):
     """Area [m^2 per unit depth] of the fluid a lattice body displaces: one l0^2 per node."""
     return body["nx"] * body["ny"] * body["spacing"] ** 2

@@ -37,7 +37,7 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.solids.mass_spring.elastic import axial_damping_forces
+from parmps.solids.mass_spring.kernels import held_force_substeps, network_forces
 
 log = logging.getLogger(__name__)
 
@@ -276,10 +276,9 @@ class Body:
 
     def acceleration_at(self, time, velocity, dt):
         """M^-1 (F - gradPhi lambda) at the current positions, for a step of length dt."""
-        force = (spring_forces(self.position, self.springs, self.rest_length, self.stiffness)
-                 + (axial_damping_forces(self.position, velocity, self.springs, self.damping)
-                    if self.axial_damping else damping_forces(velocity, self.springs, self.damping))
-                 + self.external_force(time))
+        force = self.external_force(time)
+        network_forces(self.position, velocity, self.springs, self.rest_length, self.stiffness,
+                       self.damping, self.axial_damping, force)
         if self.volume_constraint:
             loop = self.boundary
             gradient = area_gradient(self.position, loop)
@@ -308,6 +307,14 @@ class Body:
         if self.acceleration is None:
             self.acceleration = self.acceleration_at(time, self.velocity, h)
         position, velocity = self.position, self.velocity
+        if not self.volume_constraint and not len(self.load_field):
+            # Nothing in the force but the springs changes within the step: the whole
+            # substep loop runs compiled (a stiff body takes ~1000 substeps a step).
+            external = self.mass[:, None] * self.gravity + self.fluid_force
+            held_force_substeps(position, velocity, self.acceleration, self.inverse_mass,
+                                self.springs, self.rest_length, self.stiffness, self.damping,
+                                self.axial_damping, external, h, n_sub)
+            return n_sub
         for step in range(n_sub):
             velocity += 0.5 * h * self.acceleration
             position += h * velocity

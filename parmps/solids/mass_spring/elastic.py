@@ -32,11 +32,16 @@ stiffness of a plate or beam, D = E t h^3/12(1 - nu^2) (E t h^3/12 in plane
 stress), exact; the shear modulus is then 3 E2/8 instead of E/2(1 + nu).
 
 Finite bodies: the material is the rectangle spanned by the nodes,
-(nx - 1) a x (ny - 1) a. An axial spring on an edge bounds one cell instead of
-two and gets k_a/2, so a uniform strain stores exactly (nx-1)(ny-1) cells'
-energy; each node carries a quarter of every cell it touches (mass
-rho t a^2, 1/2 of it on an edge, 1/4 at a corner), so stiffness and inertia
-describe the same rectangle.
+(nx - 1) a x (ny - 1) a; each node carries a quarter of every cell it touches
+(mass rho t a^2, 1/2 of it on an edge, 1/4 at a corner). An axial spring on an
+edge line bounds one cell instead of two, so an edge line and the line next to
+it together carry 3/2 k_a, and every uniform strain stores exactly
+(nx-1)(ny-1) cells' energy however that is shared. The share is set by bending:
+with k_a/2 on the edge line, the rows' springs integrate y^2 over the depth by
+the trapezoid rule and the diagonals by the midpoint rule, and the bending
+stiffness is E2 t (h^3 + 5/4 a^2 h)/12. Moving alpha k_a from the edge line to
+the next, alpha = 5 m / (72 (m - 1)) for m cells across, makes it
+E2 t h^3/12 exactly (docs/elastic_lattice.md derives it).
 
 Damping (``damping_ratio`` zeta): dashpots along each spring (Kelvin-Voigt,
 ``-b ((v_i - v_j).e) e``, which leaves rigid rotation undamped) with
@@ -98,18 +103,54 @@ def highest_lattice_frequency(axial, diagonal, node_mass):
 
 
 def spring_kinds(shape, springs):
-    """Per spring: "horizontal", "vertical" or diagonal masks, and edge axial springs.
+    """Per spring: whether it is axial, and the edge it lies on or next to.
 
-    Nodes are numbered i + nx j (build.lattice_geometry). An axial spring whose
-    two nodes lie on the same edge row or column bounds one cell, not two.
+    Nodes are numbered i + nx j (build.lattice_geometry). Returns ``is_axial``
+    and, per spring, ``lines``: the number of node lines (rows for a horizontal
+    spring, columns for a vertical one) across the body in the spring's
+    direction of bending, and ``position``: the index of its line, 0 .. lines-1
+    (-1 for diagonals).
     """
     nx, ny = shape
     i, j = springs % nx, springs // nx
     horizontal = j[:, 0] == j[:, 1]
     vertical = i[:, 0] == i[:, 1]
-    on_edge = ((horizontal & ((j[:, 0] == 0) | (j[:, 0] == ny - 1)))
-               | (vertical & ((i[:, 0] == 0) | (i[:, 0] == nx - 1))))
-    return horizontal | vertical, on_edge
+    lines = np.where(horizontal, ny, np.where(vertical, nx, 0))
+    position = np.where(horizontal, j[:, 0], np.where(vertical, i[:, 0], -1))
+    return horizontal | vertical, lines, position
+
+
+def edge_transfer(lines):
+    """alpha: the share of k_a moved from an edge line of axial springs to the next line.
+
+    With ``lines`` node lines across the body (m = lines - 1 cells), the
+    lattice's bending stiffness is E2 t (h^3 + 5/4 a^2 h)/12 when the edge lines
+    carry k_a/2 (docs/elastic_lattice.md). Moving alpha k_a from each edge line
+    (at h/2 from the neutral axis) to the line next to it (h/2 - a) keeps every
+    uniform strain's energy and removes 4 alpha (m - 1) k_d a^3 from the bending
+    stiffness; the excess is 5 m/18 k_d a^3, so alpha = 5 m / (72 (m - 1)).
+    A body one cell deep (m = 1) has no inner line to move it to: 0.
+    """
+    cells = np.asarray(lines) - 1
+    return np.where(cells >= 2, 5.0 * cells / (72.0 * np.maximum(cells - 1, 1)), 0.0)
+
+
+def axial_weights(shape, springs):
+    """Per spring, its stiffness as a multiple of k_a (axial) or k_d (diagonal).
+
+    Axial springs on an edge line bound one cell and carry 1/2 - alpha, those on
+    the line next to an edge 1 + alpha (1 + 2 alpha when one line lies next to
+    both edges), all others 1; see :func:`edge_transfer`. The total along every
+    line of cells stays that of whole cells, so uniform strains (the patch
+    tests) are unchanged, and the bending stiffness is E2 t h^3/12 exactly.
+    """
+    is_axial, lines, position = spring_kinds(shape, springs)
+    alpha = np.where(is_axial, edge_transfer(np.maximum(lines, 2)), 0.0)
+    on_edge = is_axial & ((position == 0) | (position == lines - 1))
+    # A line next to both edges (three lines across) receives from both.
+    next_to_edge = ((position == 1).astype(float) + (position == lines - 2).astype(float))
+    weight = np.where(on_edge, 0.5 - alpha, 1.0 + next_to_edge * alpha)
+    return weight
 
 
 def cell_share(shape):
@@ -187,9 +228,13 @@ def elastic_lattice(label, spec, shape, springs):
                     representable, plane_youngs,
                     "E t h^3/12(1-nu^2)" if plane == "strain" else "E t h^3/12",
                     100.0 * (shear_lattice / shear_requested - 1.0), nu2_requested)
+    if min(shape) == 2:
+        log.warning("%s is one cell deep (%d x %d nodes): its bending stiffness across that "
+                    "cell is 9/4 of E2 t h^3/12 (no inner line of springs to correct it); use "
+                    "at least 3 nodes through the depth of a bending member", label, *shape)
     axial, diagonal = lattice_stiffnesses(plane_youngs, thickness)
-    is_axial, on_edge = spring_kinds(shape, springs)
-    stiffness = np.where(is_axial, axial, diagonal) * np.where(on_edge, 0.5, 1.0)
+    is_axial, _, _ = spring_kinds(shape, springs)
+    stiffness = np.where(is_axial, axial, diagonal) * axial_weights(shape, springs)
     cell_mass = spec["density"] * thickness * spacing ** 2
     mass = cell_mass * cell_share(shape)
     omega_max = highest_lattice_frequency(axial, diagonal, cell_mass)
