@@ -206,3 +206,11 @@ def test_weak_coupling_on_a_light_body_names_the_added_mass_instability(tmp_path
                    'coupling.scheme = "implicit_pressure"'):
         assert phrase in line, line
     assert "added-mass instability" in result.stderr.split(line)[0]  # warned at the start
+
+
+def test_unknown_coupling_scheme_is_refused_naming_the_key_and_the_schemes(tmp_path):
+    result = run_parmps([BOX, "--check", "--set", 'coupling.scheme="strong"'], timeout=60)
+    assert result.returncode == 2, result.stderr
+    (line,) = error_lines(result.stderr)
+    for phrase in ("coupling.scheme", "'weak'", "'implicit_pressure'", "'strong'"):
+        assert phrase in line, line

@@ -18,6 +18,13 @@ but the fluid step does not move them. After each fluid step:
 A node's force is computed by exactly one rank and every other rank adds zeros
 in the reduction, so the result does not depend on the rank count.
 
+Light bodies. The pressure is solved as if the nodes would not give way, and
+pushes them only afterwards: for a body lighter than the fluid it displaces
+(its added mass) that push overshoots and grows every step, the added-mass
+instability (box_in_flow at solid/fluid density 0.3 and 0.1). The scheme
+warns at the start and names that cause when such a run fails;
+:mod:`parmps.coupling.implicit_pressure` is the scheme that holds for them.
+
 Leaks. The fluid cannot pass a solid thinner than the kernel (a 3-node
 membrane) because every node, whatever its depth, repels fluid through the
 pressure of its own PPE row, and the collision model reflects a fluid particle
