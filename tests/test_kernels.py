@@ -116,9 +116,13 @@ def test_collisions_conserve_momentum_between_moving_particles(scene):
     np.testing.assert_allclose(change.sum(axis=0), 0.0, atol=1e-12)
 
 
-def reference_rows(rows, cols, w, unknown_row, global_row, is_dummy, coefficient, shift):
-    """The pressure matrix rows by plain numpy, for comparison."""
+def reference_rows(rows, cols, w, unknown_row, global_row, is_dummy, coefficient, shift,
+                   mobility=None):
+    """The pressure matrix rows by plain numpy, for comparison; with ``mobility`` (rho0/rho
+    per particle) pair ij weighs w_ij (m_i + m_j)/2."""
     n_owned = len(unknown_row)
+    if mobility is not None:
+        w = w * 0.5 * (mobility[rows] + mobility[cols])
     active = unknown_row[rows] & (w > 0.0) & ~is_dummy[cols]
     diagonal = coefficient * np.bincount(rows[active], weights=w[active], minlength=n_owned)
     diagonal += shift
@@ -161,6 +165,45 @@ def test_poisson_rows_match_reference_and_are_symmetric(scene):
     for key, value in expected.items():
         assert got[key] == pytest.approx(value, rel=1e-12)
         assert got[(key[1], key[0])] == pytest.approx(value, rel=1e-12)
+
+
+def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene):
+    """With every mobility 1 the rows are poisson_rows' bit for bit; with a light patch
+    (rho0/rho = 10, a body at density ratio 0.1) each pair weighs w (m_i + m_j)/2 and the
+    matrix stays symmetric."""
+    position, _, _, is_dummy, _, _, _, _ = scene
+    radius = 3.1 * SPACING
+    n = len(position)
+    indptr, cols = pair_list(position, 3.7 * SPACING)
+    pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
+    row_number = np.full(n, -1, np.int64)
+    row_number[~is_dummy] = np.arange(int((~is_dummy).sum()))
+    unknown = ~is_dummy
+    arguments = (indptr, cols, position, radius, row_number, unknown.astype(np.int8), 860.0,
+                 0.45, 7.0, False)
+    plain = kernels.poisson_rows(*arguments)
+    uniform = kernels.variable_density_poisson_rows(*arguments, np.ones(n))
+    for a, b in zip(plain, uniform):
+        np.testing.assert_array_equal(a, b)
+    centre = position.mean(axis=0)
+    mobility = np.where(np.abs(position - centre).max(axis=1) < 2.5 * SPACING, 10.0, 1.0)
+    assert 1 < np.count_nonzero(mobility > 1) < n // 2
+    row_ptr, columns, values = kernels.variable_density_poisson_rows(*arguments, mobility)
+    unknown_row = np.where(unknown, row_number, -1)
+    expected = reference_rows(pairs.rows, cols, pairs.weight(radius), unknown, unknown_row,
+                              is_dummy, 860.0, 0.45, mobility)
+    got = {}
+    for k in range(len(row_ptr) - 1):
+        row = columns[row_ptr[k]]
+        for p in range(row_ptr[k], row_ptr[k + 1]):
+            got[(row, columns[p])] = values[p]
+    assert got.keys() == expected.keys()
+    for key, value in expected.items():
+        assert got[key] == pytest.approx(value, rel=1e-12)
+        assert got[(key[1], key[0])] == pytest.approx(value, rel=1e-12)
+    # The light patch's rows really changed: the centre's diagonal is several times heavier.
+    centre_row = row_number[np.argmin(np.abs(position - centre).max(axis=1))]
+    assert values[row_ptr[centre_row]] - 0.45 > 5 * (plain[2][plain[0][centre_row]] - 0.45)
 
 
 def reference_collisions(position, velocity, moving, limit, restitution, n_rows):

@@ -376,7 +376,7 @@ def _laplacian_weight(r2, radius, inverse_cube):
 
 @numba.njit(cache=True, inline="always")
 def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
-                  diagonal_shift, dirichlet_diagonal, inverse_cube, d):
+                  diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, d):
     n_owned = indptr.shape[0] - 1
     n_rows = 0
     for i in range(n_owned):
@@ -418,10 +418,12 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
             w = _laplacian_weight(pair_distance2(position, i, j, d), radius, inverse_cube)
             if w <= 0.0:
                 continue
-            diagonal += coefficient * w
+            # Mobility 1 for both (one density) gives exactly coefficient * w.
+            pair = coefficient * w * (0.5 * (mobility[i] + mobility[j]))
+            diagonal += pair
             if is_unknown[j]:
                 columns[place] = row_number[j]
-                values[place] = -coefficient * w
+                values[place] = -pair
                 place += 1
         values[row_ptr[k]] = diagonal
         k += 1
@@ -445,9 +447,30 @@ def poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffic
     Gotoh's higher-order Laplacian weight re/r^3 (docs/schemes.md, HL); both
     keep the pairs with 0 < r < re, so the sparsity is the same.
     """
+    return variable_density_poisson_rows(indptr, cols, position, radius, row_number,
+                                         is_unknown, coefficient, diagonal_shift,
+                                         dirichlet_diagonal, inverse_cube,
+                                         np.ones(len(row_number)))
+
+
+@numba.njit(cache=True)
+def variable_density_poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
+                                  coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
+                                  mobility):
+    """:func:`poisson_rows` of ``div (rho0/rho grad P)``: pair ij weighs a w_ij m_ij.
+
+    ``mobility`` is rho0/rho_i of every local particle (owned and ghosts), rho0
+    the density ``coefficient`` and the source were made with, and
+    m_ij = (m_i + m_j)/2 the arithmetic mean of 1/rho: the pressure difference
+    of a pair accelerates i by 1/rho_i and j by 1/rho_j, so their separation
+    changes with the sum. Symmetric, because m_ij is; with every m_i = 1 it is
+    :func:`poisson_rows` exactly.
+    """
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
         return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                             coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube, 2)
+                             coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
+                             mobility, 2)
     return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                         coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube, 3)
+                         coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
+                         mobility, 3)

@@ -10,6 +10,7 @@ import importlib
 
 SCHEMES = {
     "weak": "parmps.coupling.weak:WeakCoupling",
+    "implicit_pressure": "parmps.coupling.implicit_pressure:ImplicitPressureCoupling",
 }
 
 

@@ -1,6 +1,7 @@
 """Case section of the fluid-solid coupling."""
 
 from parmps.config import Key, Section
+from parmps.coupling import SCHEMES
 from parmps.core.settings import has_fluid
 from parmps.errors import CaseError
 
@@ -9,10 +10,13 @@ _SPACING_TOLERANCE = 1e-6
 
 SECTIONS = {
     "coupling": Section({
-        "scheme": Key("str", "weak", choices=("weak",),
+        "scheme": Key("str", "implicit_pressure", choices=tuple(SCHEMES),
                       doc="how fluid and bodies exchange forces each step (parmps.coupling."
                           "SCHEMES): weak = one fluid step, then the bodies' substeps with "
-                          "the fluid force held"),
+                          "the fluid force held (unstable for bodies lighter than the "
+                          "fluid); implicit_pressure = the same with the nodes as particles "
+                          "of their own density in the pressure equation (the same answer "
+                          "at density ratio 1, stable for light bodies)"),
     }),
 }
 

@@ -18,6 +18,13 @@ but the fluid step does not move them. After each fluid step:
 A node's force is computed by exactly one rank and every other rank adds zeros
 in the reduction, so the result does not depend on the rank count.
 
+Light bodies. The pressure is solved as if the nodes would not give way, and
+pushes them only afterwards: for a body lighter than the fluid it displaces
+(its added mass) that push overshoots and grows every step, the added-mass
+instability (box_in_flow at solid/fluid density 0.3 and 0.1). The scheme
+warns at the start and names that cause when such a run fails;
+:mod:`parmps.coupling.implicit_pressure` is the scheme that holds for them.
+
 Leaks. The fluid cannot pass a solid thinner than the kernel (a 3-node
 membrane) because every node, whatever its depth, repels fluid through the
 pressure of its own PPE row, and the collision model reflects a fluid particle
@@ -50,27 +57,57 @@ def fluid_forces(particles, rows, constants, gradient):
     gradient scheme, so a body feels the gradient that moves the fluid.
     Returns (len(rows), d).
     """
+    pressure_force, viscous_force, _ = fluid_force_parts(particles, rows, constants, gradient)
+    return pressure_force + viscous_force
+
+
+def fluid_force_parts(particles, rows, constants, gradient):
+    """The pressure force ``-V grad P`` and the viscous force ``V mu lap u`` on ``rows``,
+    and each row's viscous relaxation rate for a particle of the fluid's density.
+
+    The viscous force is ``k_i (u_bar_i - u_i)`` with u_bar the weighted mean of
+    the neighbours' velocities; the rate returned is k_i / (rho V) =
+    ``nu 2d/(lambda0 n0) sum_j w_ij`` [1/s] (how fast that force would relax
+    the velocity of a particle of the fluid's density). Returns ((n, d), (n, d), (n,)).
+    """
     dimension = particles.position.shape[1]
-    if len(rows) == 0:
-        return np.empty((0, dimension))
+    n = len(rows)
+    if n == 0:
+        return np.empty((0, dimension)), np.empty((0, dimension)), np.empty(0)
     # Put the rows first so the pair search produces exactly their lists.
     others = np.ones(len(particles), bool)
     others[rows] = False
     order = np.concatenate([rows, np.flatnonzero(others)])
     position = np.ascontiguousarray(particles.position[order])
-    indptr, cols = pair_list(position, constants.re_laplacian, n_rows=len(rows))
-    n = len(rows)
+    indptr, cols = pair_list(position, constants.re_laplacian, n_rows=n)
     pressure = particles.pressure[order]
     has_pressure = particles.kind[order] != DUMMY
     volume = constants.spacing ** dimension
-    force = -volume * gradient.gradient(indptr, cols, position, pressure, has_pressure, n)
+    pressure_force = -volume * gradient.gradient(indptr, cols, position, pressure,
+                                                 has_pressure, n)
+    viscous_force = np.zeros((n, dimension))
+    viscous_rate = np.zeros(n)
     if constants.viscosity > 0.0:
         pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
-        laplacian = operators.laplacian(pairs, pairs.weight(constants.re_laplacian),
-                                        particles.velocity[order], n,
+        w = pairs.weight(constants.re_laplacian)
+        laplacian = operators.laplacian(pairs, w, particles.velocity[order], n,
                                         constants.n0_laplacian, constants.lambda0)
-        force += volume * constants.density * constants.viscosity * laplacian
-    return force
+        viscous_force = volume * constants.density * constants.viscosity * laplacian
+        viscous_rate = (constants.viscosity * 2.0 * dimension
+                        / (constants.lambda0 * constants.n0_laplacian)
+                        * operators.number_density(pairs, w, n))
+    return pressure_force, viscous_force, viscous_rate
+
+
+def density_ratio(inverse_mass, constants):
+    """A body's solid/fluid density: its moving nodes' mean mass over a fluid particle's
+    (rho0 l0^d); inf for a body whose nodes are all fixed."""
+    inverse_mass = np.asarray(inverse_mass, dtype=float)
+    moving = inverse_mass > 0.0
+    if not moving.any():
+        return np.inf
+    return float(np.mean(1.0 / inverse_mass[moving])
+                 / (constants.density * constants.spacing ** constants.dimension))
 
 
 def fluid_inside(particles, polygon, comm):
@@ -99,6 +136,31 @@ class WeakCoupling(Participant):
         self.fluid = fluid
         self.owners = [k % comm.size for k in range(len(model.bodies))]
         self.last_substeps = {body.name: 0 for body in model.bodies}
+        self.density_ratio = {body.name: density_ratio(model.node_inverse_mass(k),
+                                                       fluid.constants)
+                              for k, body in enumerate(model.bodies)}
+        light = self.light_bodies()
+        if light and comm.rank == 0:
+            log.warning("%s lighter than the fluid: coupling.scheme = \"weak\" is prone to "
+                        "the added-mass instability for it; \"implicit_pressure\" is not",
+                        light)
+
+    def light_bodies(self):
+        """The bodies lighter than the fluid named with their density ratio, or ''."""
+        light = {name: ratio for name, ratio in self.density_ratio.items() if ratio < 1.0}
+        return ", ".join(f"body '{name}' (solid/fluid density {ratio:.3g})"
+                         for name, ratio in light.items())
+
+    def failure_cause(self):
+        """The added-mass instability, when a body is lighter than the fluid."""
+        light = self.light_bodies()
+        if not light:
+            return None
+        return (f"the added-mass instability: {light} lighter than the fluid, and "
+                f"coupling.scheme = \"weak\" applies the fluid's answer to a body's motion a "
+                f"step late; once the fluid a body pushes aside (its added mass) outweighs "
+                f"it, that answer overshoots and grows every step. Use coupling.scheme = "
+                f"\"implicit_pressure\"")
 
     name = "coupling"
 
@@ -147,7 +209,7 @@ class WeakCoupling(Participant):
         decomposition.refresh([particles.position, particles.velocity, particles.pressure])
         n = particles.n_owned
         rows = np.flatnonzero(particles.kind[:n] == SOLID)
-        force = fluid_forces(particles, rows, self.fluid.constants, self.fluid.gradient)
+        force = self.node_forces(particles, rows, dt)
         body_of = particles.body[rows]
         node_of = particles.node[rows]
         for k, body in enumerate(model.bodies):
@@ -175,6 +237,10 @@ class WeakCoupling(Participant):
             particles.position[index] = body.position[node_of[mine]]
             particles.velocity[index] = body.velocity[node_of[mine]]
         return particles
+
+    def node_forces(self, particles, rows, dt):
+        """The fluid force on the owned node particles ``rows``, held over the bodies' step."""
+        return fluid_forces(particles, rows, self.fluid.constants, self.fluid.gradient)
 
     # Per-body series beyond the solid model's own: fluid particles inside the outline,
     # which would show a leak.

@@ -11,12 +11,19 @@ or coupling is a new participant, not a new branch in the step.
 2. ``before_pressure(particles, time, dt)``: owned particles and ghosts, before
    the projection; returns an owned-length mask of particles to hold at P = 0
    (an outlet's pressure reference), or None.
+   ``pressure_mobility(particles)``, right after it: None, or rho/rho_i of
+   every local particle (owned and ghosts), 1 where the participant has no
+   say; the pressure equation then weighs each particle's inertia (a
+   coupling's body nodes as particles of their own density).
 3. ``after_fluid(particles, time, dt, decomposition)``: after the projection;
    returns the particles (an open boundary adds and removes some: then owned
    only).
 
 ``check(particles, step, time)`` stops a step that went wrong for the
-participant (a blown-up body). ``speed(time, until)`` is the largest speed the participant moves particles at
+participant (a blown-up body). ``failure_cause()``: a sentence naming the
+physical cause a failed run most likely had that this participant knows of
+(a coupling that is unstable for the case's bodies), or None; it must be the
+same on every rank. ``speed(time, until)`` is the largest speed the participant moves particles at
 over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
 and ``diagnostics()`` add columns to the run's diagnostics;
 ``particle_owner(pid)`` names the geometry a particle belongs to and what to
@@ -45,6 +52,9 @@ class Participant:
     def before_pressure(self, particles, time, dt):
         return None
 
+    def pressure_mobility(self, particles):
+        return None
+
     def after_fluid(self, particles, time, dt, decomposition):
         return particles
 
@@ -53,6 +63,9 @@ class Participant:
 
     def check(self, particles, step, time):
         """After the step: raise RunFailure if what this participant moves went wrong."""
+
+    def failure_cause(self):
+        return None
 
     def diagnostics(self):
         return {}

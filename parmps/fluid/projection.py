@@ -103,11 +103,14 @@ class FluidSolver:
     def moving(kind):
         return (kind == FLUID) | (kind == INFLOW)
 
-    def step(self, particles, dt, step_number, dirichlet=None):
+    def step(self, particles, dt, step_number, dirichlet=None, mobility=None):
         """Advance the particles (with current ghosts) by dt; returns step statistics.
 
         ``dirichlet``: optional owned-length mask of particles held at P = 0
         besides the free surface (an outlet's pressure reference).
+        ``mobility``: optional rho/rho_i of every local particle (owned and
+        ghosts): the pressure equation becomes ``div (1/rho_i grad P)`` (bodies'
+        nodes as particles of their own density); None: one density.
         """
         timers = self.timers
         decomposition = self.decomposition
@@ -167,7 +170,7 @@ class FluidSolver:
         timers.start("assembly")
         csr_indptr, columns, values = self.laplacian.rows(
             indptr, cols, position_star, row_number, is_unknown,
-            c.density * self.compressibility / dt ** 2)
+            c.density * self.compressibility / dt ** 2, mobility)
         rhs = np.zeros(len(pressure_index))
         in_rows = unknown[pressure_index]
         rhs[in_rows] = self.source.rhs(PressureStep(

@@ -59,13 +59,21 @@ def advance(comm, state, stepper, observers, end, time_settings):
     for observer in observers:
         observer.start(state)
     while state.stop is None and end.running(state.time, state.step):
-        dt = end.clip(state.time, choose_dt(time_settings, stepper.dt_limits(state),
-                                            state.step + 1))
-        stepper.advance(state, dt)
-        state.time += dt
-        state.step += 1
-        state.dt = dt
-        stepper.check(state)
+        try:
+            dt = end.clip(state.time, choose_dt(time_settings, stepper.dt_limits(state),
+                                                state.step + 1))
+            stepper.advance(state, dt)
+            state.time += dt
+            state.step += 1
+            state.dt = dt
+            stepper.check(state)
+        except RunFailure as failure:
+            # A blow-up shows as whatever breaks first (a spring, a particle out of the
+            # domain, dt); the stepper may know the physics behind it.
+            cause = stepper.failure_cause()
+            if cause is None:
+                raise
+            raise RunFailure(f"{failure}. Likely cause: {cause}") from None
         state.particle_steps += total_particles
         state.elapsed = before + watch.elapsed()
         state.diagnostics = {"step": state.step, "time": state.time, "dt": dt,

@@ -4,6 +4,7 @@ A stepper has ``DIAGNOSTICS`` (its own columns, name -> dtype), ``start(state)``
 ``dt_limits(state)`` (a list of :class:`~parmps.run.timestep.Limit`),
 ``advance(state, dt)`` (from ``state.time``; the step is ``state.step + 1``),
 ``check(state)`` (after the step: stop loudly if it went wrong),
+``failure_cause()`` (a sentence the loop adds to a failure's message, or None),
 ``diagnostics(state)`` and ``progress(state)`` (a progress line's text), and
 ``checkpoint_state()`` / ``restore_state(saved)`` for checkpoints.
 
@@ -104,7 +105,12 @@ class FluidStepper:
             mask = participant.before_pressure(particles, time, dt)
             if mask is not None:
                 dirichlet = mask if dirichlet is None else dirichlet | mask
-        self.stats = self.fluid.step(particles, dt, step, dirichlet)
+        mobility = None
+        for participant in self.participants:
+            given = participant.pressure_mobility(particles)
+            if given is not None:
+                mobility = given if mobility is None else mobility * given
+        self.stats = self.fluid.step(particles, dt, step, dirichlet, mobility)
         for participant in self.participants:
             particles = participant.after_fluid(particles, time, dt, self.decomposition)
         state.particles = particles
@@ -164,6 +170,11 @@ class FluidStepper:
             values.update(participant.diagnostics())
         return values
 
+    def failure_cause(self):
+        causes = [cause for cause in (p.failure_cause() for p in self.participants)
+                  if cause is not None]
+        return "; ".join(causes) or None
+
     def progress(self, state):
         return f"ksp {self.stats['ksp_iterations']} its"
 
@@ -220,6 +231,9 @@ class SolidStepper:
     def diagnostics(self, state):
         return {"max_speed": self.model.max_speed(),
                 "kinetic_energy": self.model.kinetic_energy()}
+
+    def failure_cause(self):
+        return None
 
     def progress(self, state):
         return "  ".join(f"{name}: volume error {values['volume_error']:.3e}"

@@ -49,6 +49,10 @@ class SolidModel:
                      if total else np.empty(0, np.int32)),
         })
 
+    def node_inverse_mass(self, k):
+        """1/m of body k's particle nodes [1/kg] (0 for a node that does not move)."""
+        raise NotImplementedError
+
     def outline(self, k):
         """Body k's material outline as a closed polygon (for counting fluid inside it)."""
         raise NotImplementedError

@@ -31,11 +31,19 @@ class StandardLaplacian:
         # of the same size keeps the matrix's scale uniform for the smoother.
         self.dirichlet_diagonal = constants.laplacian_coefficient * constants.n0_laplacian
 
-    def rows(self, indptr, cols, position, row_number, is_unknown, diagonal_shift):
-        """CSR (row pointers, global columns, values) of the owned rows with a pressure."""
-        return kernels.poisson_rows(indptr, cols, position, self.constants.re_laplacian,
-                                    row_number, is_unknown, self.coefficient, diagonal_shift,
-                                    self.dirichlet_diagonal, self.inverse_cube)
+    def rows(self, indptr, cols, position, row_number, is_unknown, diagonal_shift,
+             mobility=None):
+        """CSR (row pointers, global columns, values) of the owned rows with a pressure.
+
+        ``mobility``: rho0/rho of every local particle where bodies' nodes take part
+        in the solve (the implicit-pressure coupling), None for one density.
+        """
+        arguments = (indptr, cols, position, self.constants.re_laplacian, row_number,
+                     is_unknown, self.coefficient, diagonal_shift, self.dirichlet_diagonal,
+                     self.inverse_cube)
+        if mobility is None:
+            return kernels.poisson_rows(*arguments)
+        return kernels.variable_density_poisson_rows(*arguments, mobility)
 
 
 class HigherOrderLaplacian(StandardLaplacian):

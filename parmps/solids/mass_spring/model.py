@@ -121,6 +121,10 @@ class MassSpringModel(SolidModel):
     def particle_counts(self):
         return [body.n_material for body in self.bodies]
 
+    def node_inverse_mass(self, k):
+        body = self.bodies[k]
+        return body.inverse_mass[:body.n_material]
+
     def outline(self, k):
         body = self.bodies[k]
         return body.position[body.outline]

@@ -1,0 +1,85 @@
+"""Coupling with the bodies' inertia in the pressure equation (docs/design.md §1.6).
+
+Why. The weak coupling solves the pressure with the nodes moving as predicted
+(``x + dt v``) and only then lets the pressure push them. The pressure is then
+what it takes to move the fluid around nodes that will not give way; on a body
+lighter than the fluid's added mass, the force that answers it overshoots by
+about (added mass / body mass) each step and the exchange grows without bound
+(the added-mass instability): box_in_flow blows up at solid/fluid density 0.3
+and 0.1.
+
+What. The nodes become particles of their own density in the pressure
+equation, ``div (1/rho_i grad P) = source``: a node of mass m_i stands for a
+particle of density rho_i = m_i / l0^d (the fluid force on it is -l0^d grad P,
+so its acceleration is -grad P / rho_i), and pair ij's Laplacian weighs
+(1/rho_i + 1/rho_j)/2 (:func:`parmps.core.kernels.variable_density_poisson_rows`).
+The pressure then accounts for how far the nodes give way: the fluid and the
+nodes share one pressure solve, which is the implicit part a light body needs.
+Springs, dashpots, loads and the area constraint stay explicit: after the
+projection each body's owner advances it with the fluid force of the new
+pressure held, exactly as in the weak coupling (the area multiplier acts on
+the total force, so the area is kept as tightly). A node that cannot move
+(pinned) is a wall to the pressure, weighed with the fluid's density as walls
+are. Fluid-only neighbourhoods and bodies of the fluid's density give the
+weak coupling's matrix exactly, so at density ratio 1 the two schemes agree
+to round-off.
+
+Viscosity. The viscous force on a node is explicit: ``k_i (u_bar_i - u_i)``
+relaxes the node's velocity towards its neighbours' at the rate k_i / m_i,
+which for a light node is rho0/rho_i times the fluid's own. The step's viscous
+limit (time.viscous_number) keeps that explicit relaxation stable for a
+particle of the fluid's density only; a node at density ratio 0.1 in
+box_in_flow relaxes at dt k/m = 3.3 per step, beyond the explicit limit of 2. The node's own share of
+the relaxation beyond the fluid's is therefore taken implicitly (backward
+Euler in u_i): the force is divided by ``1 + dt k_i (1/m_i - 1/m_0)``, m_0 the
+mass of a fluid particle. At density ratio 1 and above the force is the weak
+coupling's unchanged.
+"""
+
+import numpy as np
+
+from parmps.core.particles import SOLID
+from parmps.coupling.weak import WeakCoupling, fluid_force_parts
+
+
+class ImplicitPressureCoupling(WeakCoupling):
+    """The weak coupling's exchange with the nodes' inertia in the pressure equation."""
+
+    def __init__(self, model, comm, fluid):
+        super().__init__(model, comm, fluid)
+        constants = fluid.constants
+        volume = constants.spacing ** constants.dimension
+        # rho0 / rho_i = rho0 l0^d / m_i per particle node, bodies one after the other;
+        # a node that does not move (1/m = 0) is weighed like a wall (1).
+        node_mobility = []
+        for k in range(len(model.bodies)):
+            inverse_mass = np.asarray(model.node_inverse_mass(k), dtype=float)
+            node_mobility.append(np.where(inverse_mass > 0.0,
+                                          constants.density * volume * inverse_mass, 1.0))
+        counts = [len(m) for m in node_mobility]
+        self.first_node = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) \
+            if counts else np.zeros(0, np.int64)
+        self.node_mobility = np.concatenate(node_mobility) if counts else np.zeros(0)
+
+    def pressure_mobility(self, particles):
+        """rho0/rho_i of every local particle (ghosts too): 1 but on body nodes.
+
+        Ghosts carry their body and node index, and every rank holds every
+        body's masses, so no communication is needed.
+        """
+        mobility = np.ones(len(particles))
+        nodes = np.flatnonzero(particles.kind == SOLID)
+        mobility[nodes] = self.mobility_of(particles, nodes)
+        return mobility
+
+    def mobility_of(self, particles, nodes):
+        """rho0/rho_i of the node particles ``nodes`` (indices into ``particles``)."""
+        return self.node_mobility[self.first_node[particles.body[nodes]] + particles.node[nodes]]
+
+    def node_forces(self, particles, rows, dt):
+        """Pressure force, plus the viscous force with a light node's excess relaxation
+        taken implicitly (see the module's docstring)."""
+        pressure_force, viscous_force, viscous_rate = fluid_force_parts(
+            particles, rows, self.fluid.constants, self.fluid.gradient)
+        excess = np.maximum(self.mobility_of(particles, rows) - 1.0, 0.0)
+        return pressure_force + viscous_force / (1.0 + dt * viscous_rate * excess)[:, None]
