@@ -15,11 +15,11 @@ def _mps_section():
         "neighbour_threshold": Key("float", 0.0, ge=0.0, lt=1.0,
                                    doc="also surface if neighbour count < this times the "
                                        "full-lattice count (0 disables)"),
-        "source": Key("str", "density", choices=tuple(SOURCES),
+        "source": Key("str", "mixed", choices=tuple(SOURCES),
                       doc="the PPE source scheme (settings in [mps.<name>])"),
         "laplacian": Key("str", "standard", choices=tuple(LAPLACIANS),
                          doc="the PPE's Laplacian (settings in [mps.<name>])"),
-        "gradient": Key("str", "minimum", choices=tuple(GRADIENTS),
+        "gradient": Key("str", "corrected", choices=tuple(GRADIENTS),
                         doc="the pressure-gradient scheme (settings in [mps.<name>])"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True),

@@ -144,9 +144,12 @@ class FluidStepper:
         speed = max_speed(particles, comm)
         courant = speed * state.dt / self.spacing
         if courant > 1.0:
+            fixed = self.case["time"]["fixed_dt"]
+            advice = (f"; the fixed time.fixed_dt = {fixed:g} s breaks the Courant limit: lower "
+                      f"it or set it to 0 for adaptive steps" if fixed > 0 else "")
             raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
                              f"{speed:.4g} m/s, dt {state.dt:.3g} s): particles jump more than a "
-                             f"spacing per step; the run is unstable")
+                             f"spacing per step; the run is unstable{advice}")
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),

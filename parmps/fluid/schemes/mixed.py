@@ -11,7 +11,10 @@ from parmps.core import kernels
 
 
 class MixedSource:
-    KEYS = {"relaxation": Key("float", 0.01, gt=0.0, le=1.0,
+    # 0.1 measured quietest in the still tank (bottom-probe noise over 0.5-1 s at
+    # l0 = 1 cm with the corrected gradient: 3.4 % of rho g H at 0.03, 1.4 % at 0.1,
+    # 2.7 % at 0.2): below it the pressure alternates from step to step.
+    KEYS = {"relaxation": Key("float", 0.1, gt=0.0, le=1.0,
                               doc="gamma of the number-density term")}
 
     def __init__(self, settings, constants):
