@@ -45,6 +45,8 @@ from parmps.coupling.weak import WeakCoupling, fluid_force_parts
 class ImplicitPressureCoupling(WeakCoupling):
     """The weak coupling's exchange with the nodes' inertia in the pressure equation."""
 
+    prone_to_added_mass_instability = False
+
     def __init__(self, model, comm, fluid):
         super().__init__(model, comm, fluid)
         constants = fluid.constants
