@@ -9,7 +9,8 @@
 Each run builds cases/dam_break.toml at the spacing that gives about N particles
 (fluid, walls and dummies), takes W warm-up steps (numba compilation, first
 AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
-us_per_particle_step and a breakdown of seconds by part (the slowest rank's).
+us_per_particle_step, a breakdown of seconds by part (the slowest rank's) and
+max_rss_mb, the peak resident memory summed over the ranks.
 ``--set`` applies case overrides as parmps does (a pressure scheme, say).
 Runs with more ranks than cores oversubscribe, which the line records.
 
@@ -37,6 +38,7 @@ less with the load than the wall time; MPI's busy waiting counts in it on 2 rank
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -60,16 +62,14 @@ def spacing_for(target):
     from parmps.tools import analysis
     lower, upper = analysis.fluid_extent(_case(None))
     width, height = upper - lower
+    # The fluid alone is m x (height/width) m particles; the walls add a few percent,
+    # so only the m a little below that count are built and counted.
+    fluid_only = max(10, int(math.sqrt(target * width / height)))
+    candidates = range(int(0.85 * fluid_only), fluid_only + 1, max(1, fluid_only // 60))
     best = None
-    for m in range(10, 400):
+    for m in candidates:
         spacing = width / m
-        fluid = m * round(height / spacing)
-        if fluid > 2 * target:
-            break
-        if fluid < target / 4:
-            continue
-        case = _case(spacing)
-        total = len(scene.build(case)[0])
+        total = len(scene.build(_case(spacing))[0])
         if best is None or abs(total - target) < abs(best[1] - target):
             best = (spacing, total)
     return best
@@ -129,12 +129,15 @@ def worker(args):
     breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
     breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
     particles = comm.allreduce(run.state.particles.n_owned)
+    # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
+    memory = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1024.0
     if comm.rank == 0:
         line = {
             "particles": particles, "ranks": comm.size, "steps": args.steps,
             "seconds": round(seconds, 4),
             "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
             "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
+            "max_rss_mb": round(memory, 1),
             "spacing": spacing,
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
