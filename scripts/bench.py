@@ -3,24 +3,56 @@
 
     scripts/bench.py [--particles N ...] [--ranks R ...] [--steps S] [--warmup W]
                      [--set SECTION.KEY=VALUE ...]
+    scripts/bench.py --time-to-solution [--spacing L0 ...] [--ranks R ...] [--end-time T]
+                     [--set SECTION.KEY=VALUE ...]
 
 Each run builds cases/dam_break.toml at the spacing that gives about N particles
 (fluid, walls and dummies), takes W warm-up steps (numba compilation, first
 AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
-us_per_particle_step and a breakdown of seconds by part (the slowest rank's).
+us_per_particle_step, a breakdown of seconds by part (the slowest rank's) and
+max_rss_mb, the peak resident memory summed over the ranks.
 ``--set`` applies case overrides as parmps does (a pressure scheme, say).
 Runs with more ranks than cores oversubscribe, which the line records.
+
+``--time-to-solution`` runs cases/dam_break_2d_peer.toml (the 2D dam break of
+MPS-Basic's and DualSPHysics's examples) as a user would, ``python -m parmps``
+under mpirun, to t = 0.5 s (``--end-time``) at each spacing (5 mm and 2.5 mm by
+default) on each rank count (1 and 2), and prints per run: ``wall_seconds``, the
+loop's time (the last row of /diagnostics/wall_seconds: start-up and the final
+close are not in it), ``steps``, ``us_per_particle_step`` (the loop's time over
+particles x steps), ``ksp_iterations`` (their total), ``cpu_seconds`` (user + system
+time of the whole job, every rank, start-up included: on a shared machine it moves
+less with the load than the wall time; MPI's busy waiting counts in it on 2 ranks),
+``load`` (the 1-minute load average at the start), and the surge front:
+
+- ``front_m``: the leading edge on the floor at the end time, the largest x of the
+  fluid particles whose centres lie within ``FLOOR_BAND`` (20 mm) of the floor,
+  plus half a spacing (where the particles' volume ends), measured from the left
+  wall. By t = 0.5 s the surge has reached the right wall (x = 1 m) and runs up it,
+  so ``front_m`` says the water is there; ``front_rms`` is the accuracy figure:
+- ``front_rms``: the column is Martin & Moyce's n^2 = 2 (height 2a, a = 0.25 m), so
+  the surge front of every frame is compared with their record for
+  T = t sqrt(2 g / a) <= 2.8, before the front meets the right wall
+  (validation/dam_break's metric, unshifted RMS relative error).
 """
 
 import argparse
 import json
+import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CASE = os.path.join(ROOT, "cases", "dam_break.toml")
+PEER_CASE = os.path.join(ROOT, "cases", "dam_break_2d_peer.toml")
+PEER_SPACINGS = (0.005, 0.0025)
+# Fluid within this height of the floor counts for the front (spray above it does not).
+FLOOR_BAND = 0.02
+# The comparison with Martin & Moyce stops before the front meets the right wall at Z = 4.
+FRONT_COMPARE_UNTIL = 2.8
 
 
 def spacing_for(target):
@@ -30,16 +62,14 @@ def spacing_for(target):
     from parmps.tools import analysis
     lower, upper = analysis.fluid_extent(_case(None))
     width, height = upper - lower
+    # The fluid alone is m x (height/width) m particles; the walls add a few percent,
+    # so only the m a little below that count are built and counted.
+    fluid_only = max(10, int(math.sqrt(target * width / height)))
+    candidates = range(int(0.85 * fluid_only), fluid_only + 1, max(1, fluid_only // 60))
     best = None
-    for m in range(10, 400):
+    for m in candidates:
         spacing = width / m
-        fluid = m * round(height / spacing)
-        if fluid > 2 * target:
-            break
-        if fluid < target / 4:
-            continue
-        case = _case(spacing)
-        total = len(scene.build(case)[0])
+        total = len(scene.build(_case(spacing))[0])
         if best is None or abs(total - target) < abs(best[1] - target):
             best = (spacing, total)
     return best
@@ -74,7 +104,7 @@ def worker(args):
     from parmps.run.observers import Callback
     from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
-    spacing = args.spacing
+    spacing = args.spacing[0]
     case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
     run = Simulation(case, "", comm, directory)
@@ -99,12 +129,15 @@ def worker(args):
     breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
     breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
     particles = comm.allreduce(run.state.particles.n_owned)
+    # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
+    memory = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1024.0
     if comm.rank == 0:
         line = {
             "particles": particles, "ranks": comm.size, "steps": args.steps,
             "seconds": round(seconds, 4),
             "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
             "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
+            "max_rss_mb": round(memory, 1),
             "spacing": spacing,
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
@@ -115,25 +148,106 @@ def worker(args):
         shutil.rmtree(directory, ignore_errors=True)
 
 
+def front_on_floor(frame, floor, wall_x, spacing):
+    """The leading edge of the fluid on the floor: the largest x of the fluid particles
+    within FLOOR_BAND of it, plus half a spacing, from the wall at ``wall_x``."""
+    from parmps.core.particles import FLUID
+    position = frame["position"][frame["kind"] == FLUID]
+    on_floor = position[position[:, 1] < floor + FLOOR_BAND]
+    return float(on_floor[:, 0].max() + 0.5 * spacing - wall_x)
+
+
+def time_to_solution(spacing, ranks, end_time, overrides):
+    """One run of the peer dam break to ``end_time``; returns its JSON line as a dict."""
+    import shutil
+
+    import h5py
+
+    from parmps import validation
+    from parmps.io.frames import read_frame
+    from parmps.parallel.mpi import launch_environment, mpirun_command
+    from parmps.tools import analysis
+    out = tempfile.mkdtemp(prefix="parmps-tts-")
+    try:
+        argv = [sys.executable, "-m", "parmps", PEER_CASE, "-o", out, "--end-time",
+                repr(end_time), "--set", f"particles.spacing={spacing!r}"]
+        argv += [word for override in overrides for word in ("--set", override)]
+        command = mpirun_command(ranks, argv) if ranks > 1 else argv
+        load = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        result = subprocess.run(command, capture_output=True, text=True,
+                                env=launch_environment(), cwd=ROOT)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        line = {"case": os.path.relpath(PEER_CASE, ROOT), "spacing": spacing, "ranks": ranks,
+                "end_time": end_time, "load": round(load, 2)}
+        if result.returncode != 0:
+            return dict(line, error=result.stderr.strip().splitlines()[-3:])
+        path = os.path.join(out, "result.h5")
+        with h5py.File(path, "r") as handle:
+            diagnostics = handle["diagnostics"]
+            seconds = float(diagnostics["wall_seconds"][-1])
+            steps = int(diagnostics["step"][-1])
+            iterations = int(diagnostics["ksp_iterations"][()].sum())
+        case = analysis.result_case(path)
+        last = read_frame(path)
+        particles = len(last["id"])
+        tank = case["tank"][0]
+        line.update({
+            "particles": particles, "wall_seconds": round(seconds, 2), "steps": steps,
+            "us_per_particle_step": round(1e6 * seconds / (particles * steps), 3),
+            "ksp_iterations": iterations,
+            "cpu_seconds": round(after.ru_utime + after.ru_stime
+                                 - before.ru_utime - before.ru_stime, 1),
+            "front_m": round(front_on_floor(last, tank["lower"][1], tank["lower"][0], spacing), 4),
+            "oversubscribed": ranks > (os.cpu_count() or 1)})
+        dam_break = validation.load("dam_break")
+        if end_time * analysis.dam_break_time_scale(case) >= FRONT_COMPARE_UNTIL:
+            front = analysis.surge_front_error(
+                path, case, dam_break.reference, compare_until=FRONT_COMPARE_UNTIL,
+                delay_range=dam_break.metric["delay_range"],
+                delay_step=dam_break.metric["delay_step"])
+            line["front_rms"] = round(front["rms"], 4)
+        if overrides:
+            line["set"] = list(overrides)
+        return line
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--particles", type=int, nargs="+", default=[2500, 10000, 40000])
-    parser.add_argument("--ranks", type=int, nargs="+", default=[1])
+    parser.add_argument("--ranks", type=int, nargs="+",
+                        help="rank counts (default 1; 1 2 with --time-to-solution)")
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--warmup", type=int, default=5)
     parser.add_argument("--set", action="append", default=[], dest="overrides",
                         metavar="SECTION.KEY=VALUE", help="a case override, as parmps --set")
+    parser.add_argument("--time-to-solution", action="store_true",
+                        help="run cases/dam_break_2d_peer.toml to --end-time and print the "
+                             "wall time, steps, cost and front of each run")
+    parser.add_argument("--spacing", type=float, nargs="+",
+                        help="with --time-to-solution: l0 [m] (default 0.005 0.0025)")
+    parser.add_argument("--end-time", type=float, default=0.5,
+                        help="with --time-to-solution: simulated seconds (default 0.5)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--spacing", type=float, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         worker(args)
         return 0
+    if args.time_to_solution:
+        status = 0
+        for spacing in args.spacing or PEER_SPACINGS:
+            for ranks in args.ranks or [1, 2]:
+                line = time_to_solution(spacing, ranks, args.end_time, args.overrides)
+                status = status or int("error" in line)
+                print(json.dumps(line), flush=True)
+        return status
     from parmps.parallel.mpi import launch_environment, mpirun_command
     status = 0
     for target in args.particles:
         spacing, _ = spacing_for(target)
-        for ranks in args.ranks:
+        for ranks in args.ranks or [1]:
             argv = [sys.executable, os.path.abspath(__file__), "--worker", "--spacing",
                     repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup)]
             argv += [word for override in args.overrides for word in ("--set", override)]

@@ -256,3 +256,47 @@ def test_kernels_want_two_or_three_components():
     indptr, cols = np.zeros(4, np.int64), np.empty(0, np.int64)
     with pytest.raises(ValueError, match="2 or 3"):
         kernels.number_density(indptr, cols, position, 1.0, 3)
+
+
+def test_row_masks_leave_the_other_rows_empty_and_the_rows_kept_unchanged(scene):
+    """A mask of rows (the fluid step's: no dummies in the pair list, only moving
+    particles for the viscous term and the gradient) changes nothing in the rows kept."""
+    position, velocity, pressure, is_dummy, n, indptr, cols, _ = scene
+    keep = ~is_dummy[:n]
+    masked_indptr, masked_cols = pair_list(position, 3.7 * SPACING, n_rows=n, rows=keep)
+    lengths, masked_lengths = np.diff(indptr), np.diff(masked_indptr)
+    assert np.all(masked_lengths[~keep] == 0)
+    np.testing.assert_array_equal(masked_lengths[keep], lengths[keep])
+    np.testing.assert_array_equal(masked_cols, np.concatenate(
+        [cols[indptr[i]:indptr[i + 1]] for i in np.flatnonzero(keep)]))
+    moving = keep & (position[:n, 0] > 5 * SPACING)
+    radius = 3.1 * SPACING
+    full = kernels.vector_laplacian_sum(indptr, cols, position, velocity, radius, n)
+    some = kernels.vector_laplacian_sum(indptr, cols, position, velocity, radius, n, moving)
+    np.testing.assert_array_equal(some[moving], full[moving])
+    assert np.all(some[~moving] == 0.0)
+    include = ~is_dummy
+    radius = 2.1 * SPACING
+    full = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
+    some = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n,
+                                         moving)
+    np.testing.assert_array_equal(some[moving], full[moving])
+    assert np.all(some[~moving] == 0.0)
+    corrected_full, corrected_some = full.copy(), some.copy()
+    kernels.correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_full, 0.7)
+    kernels.correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_some, 0.7,
+                             moving)
+    np.testing.assert_array_equal(corrected_some[moving], corrected_full[moving])
+
+
+def test_sort_row_columns_sorts_each_row_with_its_values():
+    rng = np.random.default_rng(3)
+    row_ptr = np.array([0, 1, 5, 5, 12], np.int32)
+    columns = np.concatenate([[4], rng.permutation(4), [], rng.permutation(7) + 10])
+    columns = columns.astype(np.int32)
+    values = columns * 10.0 + 1.0
+    kernels.sort_row_columns(row_ptr, columns, values)
+    for row in range(len(row_ptr) - 1):
+        part = columns[row_ptr[row]:row_ptr[row + 1]]
+        assert np.all(np.diff(part) > 0)
+    np.testing.assert_array_equal(values, columns * 10.0 + 1.0)

@@ -147,11 +147,11 @@ def test_box_ends_where_it_should_with_its_dummies(tmp_path):
 
 def test_check_takes_the_wall_speed_into_the_first_step(tmp_path):
     path = tmp_path / "box.toml"
-    path.write_text(BOX_CASE.replace("velocity = [1.0, 0.5]", "velocity = [0.0, 4.0]")
+    path.write_text(BOX_CASE.replace("velocity = [1.0, 0.5]", "velocity = [0.0, 8.0]")
                     .replace("move_start = 0.0104", "move_start = 0.0"))
     result = run_parmps([path, "--check"], timeout=60)
     assert result.returncode == 0, result.stderr
-    # dt = cfl l0 / |v| = 0.2 x 0.01 / 4.
+    # dt = cfl l0 / |v| = 0.4 x 0.01 / 8.
     assert json.loads(result.stdout)["initial_dt"] == pytest.approx(5e-4, rel=1e-12)
 
 

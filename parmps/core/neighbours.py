@@ -28,7 +28,7 @@ def _cell_coordinates(position, origin, cell_size):
 
 @numba.njit(cache=True, inline="always")
 def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
-              indptr, indices, d):
+              indptr, indices, rows, d):
     """Pairs of rows [0, n_rows) within ``radius``, over the 3^d cells around each row.
 
     Cells are numbered key = sum_k cell_k stride_k with stride_0 = 1, so the
@@ -44,6 +44,10 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
     for i in range(n_rows):
         if not count_only:
             total = indptr[i]
+        if rows is not None and not rows[i]:
+            if count_only:
+                indptr[i + 1] = total
+            continue
         for k in range(d):
             lo[k] = max(cell[i, k] - 1, 0)
             hi[k] = min(cell[i, k] + 2, cells[k])
@@ -81,22 +85,24 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
 
 @numba.njit(cache=True)
 def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
-            indptr, indices):
+            indptr, indices, rows):
     # d as a literal, so the component loops unroll (see parmps.core.kernels).
     if position.shape[1] == 2:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         count_only, indptr, indices, 2)
+                         count_only, indptr, indices, rows, 2)
     if position.shape[1] == 3:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         count_only, indptr, indices, 3)
+                         count_only, indptr, indices, rows, 3)
     return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                     count_only, indptr, indices, position.shape[1])
+                     count_only, indptr, indices, rows, position.shape[1])
 
 
-def pair_list(position, radius, n_rows=None):
+def pair_list(position, radius, n_rows=None, rows=None):
     """CSR neighbour lists (indptr, indices) of rows [0, n_rows) against every particle.
 
-    ``position`` is (N, d) for any d >= 1; the cells are d-dimensional.
+    ``position`` is (N, d) for any d >= 1; the cells are d-dimensional. ``rows``:
+    optional mask (length >= n_rows) of the rows to search; the others get empty
+    lists (they still appear as neighbours of the rows searched).
     """
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = len(position)
@@ -119,10 +125,10 @@ def pair_list(position, radius, n_rows=None):
     order = np.argsort(key, kind="stable")
     cell_start = np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
     _search(position, n_rows, radius, cells, stride, order, cell_start, cell, True, indptr,
-            np.empty(0, np.int64))
+            np.empty(0, np.int64), rows)
     indices = np.empty(indptr[-1], np.int64)
     _search(position, n_rows, radius, cells, stride, order, cell_start, cell, False, indptr,
-            indices)
+            indices, rows)
     return indptr, indices
 
 

@@ -122,7 +122,9 @@ class FluidSolver:
         moving = self.moving(kind[:n])
 
         timers.start("neighbours")
-        indptr, cols = pair_list(position, c.search_radius, n_rows=n)
+        # Dummies need no sums of their own: they carry no pressure and do not move; they
+        # count only as the neighbours of others.
+        indptr, cols = pair_list(position, c.search_radius, n_rows=n, rows=kind[:n] != DUMMY)
 
         timers.start("operators")
         velocity_star = velocity.copy()
@@ -131,7 +133,7 @@ class FluidSolver:
         if c.viscosity > 0.0:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(indptr, cols, position, velocity,
-                                             c.re_laplacian, n)
+                                             c.re_laplacian, n, moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
@@ -193,8 +195,9 @@ class FluidSolver:
         decomposition.refresh([pressure])
 
         timers.start("operators")
+        # Only the particles the correction moves need the gradient.
         pressure_gradient = self.gradient.gradient(indptr, cols, position_star, pressure,
-                                                   has_pressure, n)
+                                                   has_pressure, n, moving)
         correction = pressure_gradient[moving] / c.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction

@@ -47,7 +47,8 @@ SECTIONS = {
     }),
     "mps": _mps_section(),
     "pressure": Section({
-        "rtol": Key("float", 1.0e-8, gt=0.0, lt=1.0),
+        "rtol": Key("float", 1.0e-6, gt=0.0, lt=1.0,
+                    doc="CG stops at this residual relative to the right-hand side"),
         "max_iterations": Key("int", 1000, gt=0),
         "reuse_preconditioner": Key("int", 4, ge=0,
                                     doc="steps a preconditioner set-up is reused for "

@@ -8,7 +8,7 @@ SECTIONS = {
         "end": Key("float", gt=0.0, doc="end time [s]"),
         "dt_max": Key("float", 1.0e-3, gt=0.0, doc="largest step [s]"),
         "fixed_dt": Key("float", 0.0, ge=0.0, doc="a fixed step [s]; 0 means adaptive"),
-        "cfl": Key("float", 0.2, gt=0.0, le=1.0, doc="C_cfl: dt <= C_cfl l0 / |u|max"),
+        "cfl": Key("float", 0.4, gt=0.0, le=1.0, doc="C_cfl: dt <= C_cfl l0 / |u|max"),
         "viscous_number": Key("float", 0.2, gt=0.0, le=1.0, doc="dt <= C l0^2 / nu"),
         "output_interval": Key("float", 0.05, gt=0.0, doc="time between frames [s]"),
         "max_steps": Key("int", 0, ge=0, doc="stop after this many steps; 0 means no limit"),

@@ -18,11 +18,12 @@ class MinimumPressureGradient:
     def __init__(self, settings, constants):
         self.constants = constants
 
-    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows):
-        """(n_rows, d) pressure gradient of the rows [0, n_rows) of the pair list."""
+    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None):
+        """(n_rows, d) pressure gradient of the rows [0, n_rows) of the pair list; with
+        ``rows`` (a mask), of those rows only, the others 0."""
         c = self.constants
         return (c.dimension / c.n0) * kernels.pressure_gradient_sum(
-            indptr, cols, position, pressure, has_pressure, c.re_number_density, n_rows)
+            indptr, cols, position, pressure, has_pressure, c.re_number_density, n_rows, rows)
 
 
 class CorrectedGradient(MinimumPressureGradient):
@@ -36,9 +37,10 @@ class CorrectedGradient(MinimumPressureGradient):
         super().__init__(settings, constants)
         self.eigenvalue_limit = settings["eigenvalue_limit"]
 
-    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows):
+    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None):
         c = self.constants
-        gradient = super().gradient(indptr, cols, position, pressure, has_pressure, n_rows)
+        gradient = super().gradient(indptr, cols, position, pressure, has_pressure, n_rows,
+                                    rows)
         kernels.correct_gradient(indptr, cols, position, has_pressure, c.re_number_density,
-                                 c.dimension / c.n0, gradient, self.eigenvalue_limit)
+                                 c.dimension / c.n0, gradient, self.eigenvalue_limit, rows)
         return gradient
