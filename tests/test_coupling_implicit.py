@@ -202,7 +202,9 @@ def test_weak_coupling_on_a_light_body_names_the_added_mass_instability(tmp_path
                          "--set", "time.output_interval=0.1"] + WEAK, timeout=300)
     assert result.returncode == 1, result.stderr[-2000:]
     (line,) = error_lines(result.stderr)
-    for phrase in ("blew up", "added-mass instability", "body 'box' (solid/fluid density 0.3)",
+    # Which guard stops it first (the body's, or the Courant check on the nodes it
+    # flings) depends on the step; either line must name the cause and the cure.
+    for phrase in ("added-mass instability", "body 'box' (solid/fluid density 0.3)",
                    'coupling.scheme = "implicit_pressure"'):
         assert phrase in line, line
     assert "added-mass instability" in result.stderr.split(line)[0]  # warned at the start
