@@ -214,3 +214,13 @@ def test_unknown_coupling_scheme_is_refused_naming_the_key_and_the_schemes(tmp_p
     (line,) = error_lines(result.stderr)
     for phrase in ("coupling.scheme", "'weak'", "'implicit_pressure'", "'strong'"):
         assert phrase in line, line
+
+
+def test_implicit_scheme_does_not_warn_of_the_weak_schemes_instability():
+    """The warning (and the failure diagnosis) of the added-mass instability belong to the
+    weak scheme: a light body under the default scheme gets neither."""
+    result = run_parmps([BOX, "--check", "--set", "body.0.density=300.0"], timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "added-mass" not in result.stderr
+    weak = run_parmps([BOX, "--check", "--set", "body.0.density=300.0"] + WEAK, timeout=120)
+    assert "added-mass instability" in weak.stderr

@@ -45,6 +45,10 @@ from parmps.coupling.weak import WeakCoupling, fluid_force_parts
 class ImplicitPressureCoupling(WeakCoupling):
     """The weak coupling's exchange with the nodes' inertia in the pressure equation."""
 
+    # The pressure already answers a light node's motion: neither the weak scheme's warning
+    # nor its added-mass diagnosis of a failure applies.
+    ANSWERS_A_STEP_LATE = False
+
     def __init__(self, model, comm, fluid):
         super().__init__(model, comm, fluid)
         constants = fluid.constants
