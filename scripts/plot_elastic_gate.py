@@ -57,8 +57,8 @@ def main():
     measured = check.measure(path)
     case = analysis.result_case(path)
 
-    figure = plt.figure(figsize=(10, 7.2), dpi=110)
-    grid = figure.add_gridspec(2, 4, height_ratios=(1.2, 1.0))
+    figure = plt.figure(figsize=(10, 5.6), dpi=110)
+    grid = figure.add_gridspec(2, 4, height_ratios=(1.6, 0.8))
     ax = figure.add_subplot(grid[0, :])
     ax.plot(measured["time"], 1e3 * measured["dx"], color="C0",
             label="horizontal (parmps)")
