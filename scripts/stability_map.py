@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Stability map of the coupled bodies (issue 12, item 6): which runs reach their end.
 
-    scripts/stability_map.py [--ranks 1] [--box-end 0.3] [--gate-end 0.2]
+    scripts/stability_map.py [--ranks 1] [--box-end 0.3] [--gate-end 0.15]
                              [--only box gate] [--work out/stability-map] [--docs docs]
 
 - box_in_flow (cases/box_in_flow.toml) at solid/fluid density 0.01, 0.1, 0.3, 1 and 10
@@ -224,7 +224,7 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--ranks", type=int, default=1)
     parser.add_argument("--box-end", type=float, default=0.3)
-    parser.add_argument("--gate-end", type=float, default=0.2)
+    parser.add_argument("--gate-end", type=float, default=0.15)
     parser.add_argument("--timeout", type=float, default=1800)
     parser.add_argument("--only", nargs="+", choices=("box", "gate"), default=("box", "gate"))
     parser.add_argument("--work", default=os.path.join(ROOT, "out", "stability-map"))
