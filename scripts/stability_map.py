@@ -142,7 +142,7 @@ def cell(row):
         again = row["retry"]
         retry = (f"; with time.dt_max = {again['dt_max']:g} s: "
                  + ("ran" if again["outcome"] == "ran to the end" else
-                    f"stopped at t = {again.get('end') or 0:.3g} s") +
+                    f"**stopped** at t = {again.get('end') or 0:.3g} s [{again['note']}]") +
                  (f", {again['wall']:.0f} s" if again.get("wall") is not None else ""))
     if outcome.startswith("stopped"):
         return (f"**stopped** at t = {row.get('end') or 0:.3g} s [{row['note']}]{wall_text}"
@@ -162,9 +162,10 @@ def markdown(parts, command):
     notes = []
 
     def noted(row):
-        if row["outcome"] != "ran to the end":
-            notes.append(row["outcome"].replace("|", "/"))
-            row["note"] = str(len(notes))
+        for run_row in (row, row.get("retry")):
+            if run_row and run_row["outcome"] != "ran to the end":
+                notes.append(run_row["outcome"].replace("|", "/"))
+                run_row["note"] = str(len(notes))
         return row
 
     box = parts.get("box")
@@ -215,6 +216,12 @@ def markdown(parts, command):
                  f"ran to the end, {sum(r['outcome'].startswith('stopped') for r in every)} "
                  f"stopped with a message, {len(silent)} ended otherwise (NaN without a "
                  "message, a crash or a hang).")
+    retries = [r["retry"] for r in every if r.get("retry")]
+    if retries:
+        lines[-1] += (f" The {len(retries)} that stopped, run again with the shorter step: "
+                      f"{sum(r['outcome'] == 'ran to the end' for r in retries)} ran to the "
+                      f"end, {sum(r['outcome'].startswith('stopped') for r in retries)} stopped "
+                      "with a message.")
     lines += ["", END]
     return "\n".join(lines)
 
