@@ -156,3 +156,27 @@ def test_displacement_probe_follows_the_nodes_and_the_check_is_in_the_output(tmp
         steps = len(handle["diagnostics/time"])
         assert len(checks["time"]) == steps
         assert checks["total"][-1] == checks["crossings"][:].sum()
+
+
+def test_check_and_displacement_go_on_after_a_restart_without_repeating_rows(tmp_path):
+    """The check's rows, its total and its (id, side) record, and the displacement probe's
+    rows, continue through a checkpoint (1 rank, then 2) as in the uninterrupted run."""
+    path = tmp_path / "case.toml"
+    path.write_text(CASE + '\n[[probe]]\nname = "tip"\nkind = "displacement"\nbody = "gate"\n'
+                    'nodes = [0, 1, 2]\n\n[[check]]\nkind = "body_crossing"\nbody = "gate"\n')
+    tight = ["-pressure_ksp_rtol", "1e-12"]
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    for args, ranks in (([path, "-o", whole, "--end-time", "0.02"], 1),
+                        ([path, "-o", split, "--end-time", "0.01"], 1),
+                        (["--restart", split, "--end-time", "0.02"], 2)):
+        result = run_parmps(args + tight, ranks=ranks, timeout=300)
+        assert result.returncode == 0, result.stderr[-3000:]
+    rows = {}
+    for name, out in (("whole", whole), ("split", split)):
+        with h5py.File(out / "result.h5", "r") as handle:
+            rows[name] = (handle["checks/body_crossing_gate/time"][()],
+                          handle["checks/body_crossing_gate/total"][()],
+                          handle["probes/tip/value"][()])
+    np.testing.assert_allclose(rows["split"][0], rows["whole"][0], rtol=1e-12)
+    np.testing.assert_array_equal(rows["split"][1], rows["whole"][1])
+    np.testing.assert_allclose(rows["split"][2], rows["whole"][2], rtol=0, atol=1e-9)
