@@ -102,8 +102,9 @@ def box_part(args):
             if row["outcome"] != "ran to the end":
                 # Does a shorter step hold it? (the lag of an explicit exchange grows per step)
                 dt_max = case["time"]["dt_max"] / RETRY_STEP_DIVISOR
-                retry = run(check.case_path, out + "_short_dt", sets + [f"time.dt_max={dt_max:.10g}"],
-                            args.box_end, ranks=args.ranks, timeout=args.timeout)
+                retry = run(check.case_path, out + "_short_dt",
+                            sets + [f"time.dt_max={dt_max:.10g}"], args.box_end,
+                            ranks=args.ranks, timeout=args.timeout)
                 row["retry"] = dict(outcome_record(retry, case["body"][0]["name"]), dt_max=dt_max)
             print(f"box density {ratio:g}, {factor:g} U0: {row['outcome']} "
                   f"({row.get('wall') or math.nan:.1f} s)", flush=True)
