@@ -5,7 +5,7 @@ import h5py
 import numpy as np
 import pytest
 
-from conftest import CASES, error_lines, run_parmps
+from conftest import error_lines, run_parmps
 from parmps import schema
 from parmps.checks import CHECKS
 from parmps.checks.crossing import count_crossings, lattice_mid_line, mid_line_sides
