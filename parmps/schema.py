@@ -9,6 +9,7 @@ with every default filled in, plus ``dimension``.
 
 from parmps import config
 from parmps.boundaries import settings as boundaries
+from parmps.checks import settings as checks
 from parmps.core import settings as core
 from parmps.coupling import settings as coupling
 from parmps.fluid import settings as fluid
@@ -19,7 +20,8 @@ from parmps.run import settings as run
 from parmps.solids import settings as solids
 
 # Checks run in this order, each after every section is validated.
-COMPONENTS = (core, fluid, run, boundaries, solids, coupling, parallel, io, probes)
+COMPONENTS = (core, fluid, run, boundaries, solids, coupling, parallel, io, probes,
+              checks)
 
 SECTIONS = {name: section for component in COMPONENTS
             for name, section in component.SECTIONS.items()}

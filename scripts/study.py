@@ -806,8 +806,11 @@ def write_report(study, docs, command):
             add(f"\n![box]({name})\n")
 
     # Stability map --------------------------------------------------------------------
-    if study.table_rows:
+    # scripts/stability_map.py's block (the coupled bodies' map) is kept as it stands.
+    coupled = coupled_stability_block(os.path.join(docs, "validation.md"))
+    if study.table_rows or coupled:
         add("## Stability map\n")
+    if study.table_rows:
         add("Each run under a timeout; 'ran to the end' means exit status 0 and finite fields "
             "in the last frame, 'stopped' quotes the one-line message of exit status 1.\n")
         add("| case | parameter | outcome | wall [s] | note |")
@@ -822,6 +825,8 @@ def write_report(study, docs, command):
             or "without a message" in r["outcome"])
         numbers["stability_hung"] = sum(1 for _, _, r in study.table_rows
                                         if r["outcome"].startswith("hung"))
+    if coupled:
+        add(coupled + "\n")
 
     add("## Guards added with this report\n")
     add("- a fluid particle inside wall material (tank walls, wall boxes) stops the run: "
@@ -843,6 +848,17 @@ def write_report(study, docs, command):
     with open(os.path.join(docs, "validation.json"), "w") as handle:
         json.dump(summary, handle, indent=1, default=float)
     return report.files, numbers
+
+
+def coupled_stability_block(path):
+    """The block scripts/stability_map.py wrote into the report, markers included, or ''."""
+    from stability_map import BEGIN, END
+    if not os.path.exists(path):
+        return ""
+    text = open(path).read()
+    if BEGIN not in text or END not in text:
+        return ""
+    return BEGIN + text.split(BEGIN, 1)[1].split(END, 1)[0] + END
 
 
 def short(outcome, width=90):

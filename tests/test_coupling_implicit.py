@@ -216,3 +216,30 @@ def test_unknown_coupling_scheme_is_refused_naming_the_key_and_the_schemes(tmp_p
     (line,) = error_lines(result.stderr)
     for phrase in ("coupling.scheme", "'weak'", "'implicit_pressure'", "'strong'"):
         assert phrase in line, line
+
+
+def test_implicit_scheme_does_not_warn_of_the_weak_schemes_instability():
+    """The warning (and the failure diagnosis) of the added-mass instability belong to the
+    weak scheme: a light body under the default scheme gets neither."""
+    result = run_parmps([BOX, "--check", "--set", "body.0.density=300.0"], timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "added-mass" not in result.stderr
+    weak = run_parmps([BOX, "--check", "--set", "body.0.density=300.0"] + WEAK, timeout=120)
+    assert "added-mass instability" in weak.stderr
+
+
+def test_light_box_in_a_fast_flow_stops_naming_the_light_body_and_the_fast_flow(tmp_path):
+    """Outside the implicit scheme's stable range (the stability map: solid/fluid density
+    0.01 at 5 U0 stops near t = 0.08 s), the one error line names the light body, its
+    density ratio and the fast flow, and no longer blames the weak scheme."""
+    sets = ["--set", "body.0.density=10.0", "--set", "time.output_interval=0.1"]
+    for section, count in (("inlet", 1), ("fluid_block", 4), ("outlet", 1)):
+        sets += [item for k in range(count)
+                 for item in ("--set", f"{section}.{k}.velocity=[-0.5, 0.0]")]
+    result = run_parmps([BOX, "-o", tmp_path, "--end-time", 0.3] + sets, timeout=300)
+    assert result.returncode == 1, result.stderr[-2000:]
+    (line,) = error_lines(result.stderr)
+    for phrase in ("body 'box' (solid/fluid density 0.01)", "lighter than the fluid in a "
+                   "fast flow", '"implicit_pressure"'):
+        assert phrase in line, line
+    assert 'Use coupling.scheme = "implicit_pressure"' not in line

@@ -130,9 +130,9 @@ class WeakCoupling(Participant):
     solve, and after the fluid step applies the fluid's force to the bodies.
     """
 
-    # The weak exchange is what goes unstable for light bodies: it warns of them at the
-    # start and names the cause when a run with one fails. A scheme that holds them does not.
-    prone_to_added_mass_instability = True
+    # The fluid's answer reaches the nodes a step late: a body lighter than its added mass
+    # is unstable (a scheme that puts the nodes' inertia into the pressure solve sets False).
+    ANSWERS_A_STEP_LATE = True
 
     def __init__(self, model, comm, fluid):
         self.model = model
@@ -143,7 +143,7 @@ class WeakCoupling(Participant):
         self.density_ratio = {body.name: density_ratio(model.node_inverse_mass(k),
                                                        fluid.constants)
                               for k, body in enumerate(model.bodies)}
-        light = self.light_bodies() if self.prone_to_added_mass_instability else ""
+        light = self.light_bodies() if self.ANSWERS_A_STEP_LATE else ""
         if light and comm.rank == 0:
             log.warning("%s lighter than the fluid: coupling.scheme = \"weak\" is prone to "
                         "the added-mass instability for it; \"implicit_pressure\" is not",
@@ -157,7 +157,7 @@ class WeakCoupling(Participant):
 
     def failure_cause(self):
         """The added-mass instability, when a body is lighter than the fluid."""
-        light = self.light_bodies() if self.prone_to_added_mass_instability else ""
+        light = self.light_bodies() if self.ANSWERS_A_STEP_LATE else ""
         if not light:
             return None
         return (f"the added-mass instability: {light} lighter than the fluid, and "

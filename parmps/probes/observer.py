@@ -16,6 +16,7 @@ import numpy as np
 from parmps.io.series import Series
 from parmps.probes.sampling import (SampleRows, kernel_sums, lattice_sum, shepard_pressure,
                                     surface_height)
+from parmps.probes.settings import rest_positions
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
 
@@ -24,21 +25,23 @@ log = logging.getLogger("parmps.run")
 # The out-of-plane depth a 2D force is integrated over [m].
 DEPTH = 1.0
 
-UNITS = {"pressure": "Pa", "level": "m", "force": "N"}
+UNITS = {"pressure": "Pa", "level": "m", "force": "N", "displacement": "m"}
 
 
 class Probe:
     """One probe's geometry: its row of sample points (None for a body's force) and how a
     value is made from their sums."""
 
-    def __init__(self, spec, spacing):
+    def __init__(self, spec, spacing, rest=None):
+        """``rest``: a displacement probe's nodes' mean rest position (2,)."""
         self.name = spec["name"]
         self.kind = spec["kind"]
         self.spec = spec
         self.radius = spec["radius"] * spacing
         self.full_sum = lattice_sum(spec["radius"])
         self.min_fill = spec["min_fill"]
-        self.shape = (2,) if self.kind == "force" else ()
+        self.shape = (2,) if self.kind in ("force", "displacement") else ()
+        self.rest = rest
         normal = np.zeros(2)
         if spec["normal"] is not None:
             normal = np.asarray(spec["normal"], float) / math.hypot(*spec["normal"])
@@ -66,7 +69,7 @@ class Probe:
 
     def attributes(self):
         out = {"kind": self.kind, "units": UNITS[self.kind]}
-        for key in ("position", "normal", "line", "segment"):
+        for key in ("position", "normal", "line", "segment", "nodes"):
             if self.spec[key] not in (None, []):
                 out[key] = np.asarray(self.spec[key], float)
         if self.spec["body"]:
@@ -80,12 +83,16 @@ class Probe:
         return out
 
     def value(self, sums, bodies):
+        """``bodies``: name -> the body (its nodes' positions and fluid forces)."""
+        if self.kind == "displacement":
+            body = bodies[self.spec["body"]]
+            return body.position[self.spec["nodes"]].mean(axis=0) - self.rest
         if self.kind == "pressure":
             return float(shepard_pressure(sums, self.full_sum, self.min_fill)[0])
         if self.kind == "level":
             return surface_height(sums, self.full_sum, self.heights)
         if self.row is None:
-            return np.asarray(bodies[self.spec["body"]], float)
+            return np.asarray(bodies[self.spec["body"]].total_fluid_force(), float)
         # A sample with too little fluid beside it is dry: no load there.
         pressure = np.nan_to_num(shepard_pressure(sums, self.full_sum, self.min_fill))
         return -self.normal * (pressure.sum() * self.ds * DEPTH)
@@ -96,11 +103,15 @@ class Probes(Observer):
 
     name = "probes"
 
-    def __init__(self, result, specs, spacing, model, flush_interval, end_time):
+    def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=()):
+        """``bodies``: the case's [[body]] tables (a displacement probe's rest positions)."""
         self.result = result
         self.comm = result.comm
         self.model = model
-        self.probes = [Probe(spec, spacing) for spec in specs]
+        by_name = {spec["name"] or f"body{k}": spec for k, spec in enumerate(bodies)}
+        self.probes = [Probe(spec, spacing, rest_positions(by_name[spec["body"]])[
+            spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None)
+            for spec in specs]
         self.cadences = [SimulatedInterval(p.spec["interval"], end_time)
                          if p.spec["interval"] > 0 else None for p in self.probes]
         self.flush_cadence = SimulatedInterval(flush_interval, end_time)
@@ -125,7 +136,8 @@ class Probes(Observer):
         if self.comm.rank == 0:
             os.makedirs(self.csv_directory, exist_ok=True)
             for probe, series in zip(self.probes, self.series):
-                columns = "time,fx,fy" if probe.kind == "force" else "time,value"
+                columns = {"force": "time,fx,fy", "displacement": "time,dx,dy"}.get(
+                    probe.kind, "time,value")
                 with open(self._csv_path(probe), "w") as handle:
                     handle.write(f"# probe {probe.name}: {probe.kind} "
                                  f"[{UNITS[probe.kind]}], time [s]\n{columns}\n")
@@ -156,7 +168,7 @@ class Probes(Observer):
             sums = kernel_sums(rows, p.position, p.kind, p.pressure, p.n_owned, self.comm)
         bodies = {}
         if self.model is not None:
-            bodies = {body.name: body.total_fluid_force() for body in self.model.bodies}
+            bodies = {body.name: body for body in self.model.bodies}
         values, offset = [], 0
         for k in due:
             probe = self.probes[k]

@@ -3,16 +3,18 @@
 import math
 import re
 
+import numpy as np
+
 from parmps.config import Key, Section
 from parmps.core.settings import has_fluid
 from parmps.errors import CaseError
 
-KINDS = ("pressure", "level", "force")
+KINDS = ("pressure", "level", "force", "displacement")
 
 # Which of the geometric keys each kind takes (the others must be left out).
 _GEOMETRY = {"pressure": ("position", "normal"), "level": ("line",),
-             "force": ("segment", "normal", "body")}
-_GEOMETRY_KEYS = ("position", "line", "segment", "normal", "body")
+             "force": ("segment", "normal", "body"), "displacement": ("body", "nodes")}
+_GEOMETRY_KEYS = ("position", "line", "segment", "normal", "body", "nodes")
 
 SECTIONS = {
     "probe": Section({
@@ -20,7 +22,9 @@ SECTIONS = {
         "kind": Key("str", choices=KINDS,
                     doc="pressure: a Shepard average of the fluid's pressure around a point; "
                         "level: the free-surface height along a vertical line; force: the "
-                        "fluid's force on a wall segment or on a body"),
+                        "fluid's force on a wall segment or on a body; displacement: the "
+                        "mean displacement of some of a body's nodes from their rest "
+                        "positions"),
         "position": Key("vec2", None, doc="pressure: the point [m]"),
         "normal": Key("vec2", None,
                       doc="pressure or force on a wall: the wall's normal, pointing into the "
@@ -28,7 +32,11 @@ SECTIONS = {
                           "centre line of the first fluid layer"),
         "line": Key("points", [], doc="level: [[x, y_bottom], [x, y_top]], vertical [m]"),
         "segment": Key("points", [], doc="force: the wall segment [[x0, y0], [x1, y1]] [m]"),
-        "body": Key("str", "", doc="force: the body's name (the sum over its nodes)"),
+        "body": Key("str", "", doc="force: the body's name (the sum over its nodes); "
+                                   "displacement: the body whose nodes are followed"),
+        "nodes": Key("ints", [], ge=0,
+                     doc="displacement: node indices (i + nx j on a lattice) whose mean "
+                         "displacement is sampled"),
         "interval": Key("float", 0.0, ge=0.0,
                         doc="simulated time between samples [s]; 0: every step"),
         "radius": Key("float", 2.0, ge=1.0, le=4.0,
@@ -78,8 +86,35 @@ def check(case):
                                 f"([[x, y_bottom], [x, y_top]]), got {line}")
             for point in line:
                 _inside(case, f"{label}.line", point)
+        elif kind == "displacement":
+            _check_displacement(case, label, probe)
         else:
             _check_force(case, label, probe)
+
+
+def _check_displacement(case, label, probe):
+    bodies = {spec["name"] or f"body{k}": spec for k, spec in enumerate(case["body"])}
+    if probe["body"] not in bodies:
+        raise CaseError(f"missing key '{label}.body': a displacement probe needs a body of the "
+                        f"case ({', '.join(bodies) or 'it has none'})" if not probe["body"]
+                        else f"{label}.body '{probe['body']}' is not a body of the case "
+                             f"({', '.join(bodies) or 'it has none'})")
+    if not probe["nodes"]:
+        raise CaseError(f"missing key '{label}.nodes': a displacement probe needs the node "
+                        f"indices it follows")
+    count = len(rest_positions(bodies[probe["body"]]))
+    if max(probe["nodes"]) >= count:
+        raise CaseError(f"{label}.nodes has {max(probe['nodes'])}, but body "
+                        f"'{probe['body']}' has {count} nodes")
+
+
+def rest_positions(body):
+    """A body's node positions as the case builds them (n, 2): a lattice's i + nx j."""
+    if body["type"] == "lattice":
+        i, j = np.meshgrid(np.arange(body["nx"]), np.arange(body["ny"]))
+        return np.asarray(body["lower"]) + body["spacing"] * np.column_stack(
+            [i.ravel(), j.ravel()]).astype(float)
+    return np.asarray(body["nodes"], dtype=float).reshape(-1, 2)
 
 
 def _check_force(case, label, probe):

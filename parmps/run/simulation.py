@@ -146,7 +146,10 @@ class Simulation:
         if case["probe"]:
             from parmps.probes.observer import Probes
             found.append(Probes(result, case["probe"], case["particles"]["spacing"],
-                                self.model, interval, self.end_time))
+                                self.model, interval, self.end_time, case["body"]))
+        if case["check"]:
+            from parmps.checks import check_observers
+            found += check_observers(case, result, self.model, interval, self.end_time)
         found += [observing.Frames(writer, interval, self.end_time, case["output"]["frames"]),
                   observing.Progress(self._progress_line)]
         return found

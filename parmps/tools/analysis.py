@@ -340,6 +340,28 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
             "time": times, "series": deflection}
 
 
+def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate"):
+    """The elastic gate's run (validation/elastic_gate/): its free end's displacement from
+    the displacement probe, the fluid crossings of the body_crossing check, the body's
+    largest area error and how far the run got.
+
+    Returns a dict: time, dx, dy (the tip series), dx_max and t_dx_max (the largest
+    horizontal opening and when), dy_max (the largest rise), crossings (their total),
+    volume_error (largest |A - A0|/A0) and end (the last step's time).
+    """
+    import h5py
+    time, value = read_probe(path, probe)
+    with h5py.File(path, "r") as handle:
+        total = handle["checks"][check]["total"][()]
+        end = float(handle["diagnostics"]["time"][-1])
+    error = float(np.abs(solid_series(path, body)["volume_error"]).max())
+    peak = int(np.argmax(value[:, 0]))
+    return {"time": time, "dx": value[:, 0], "dy": value[:, 1],
+            "dx_max": float(value[peak, 0]), "t_dx_max": float(time[peak]),
+            "dy_max": float(value[:, 1].max()), "crossings": int(total[-1]) if len(total) else 0,
+            "volume_error": error, "end": end}
+
+
 def lattice_area(body):
     """Area [m^2 per unit depth] of the fluid a lattice body displaces: one l0^2 per node."""
     return body["nx"] * body["ny"] * body["spacing"] ** 2

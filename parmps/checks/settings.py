@@ -1,0 +1,43 @@
+"""Case section of the run-time checks: ``[[check]]`` tables (parmps.checks)."""
+
+import re
+
+from parmps.checks import CHECKS
+from parmps.config import Key, Section
+from parmps.core.settings import has_fluid
+from parmps.errors import CaseError
+
+SECTIONS = {
+    "check": Section({
+        "kind": Key("str", choices=tuple(CHECKS),
+                    doc="body_crossing: fluid particles whose path crossed a thin lattice "
+                        "body's mid-line, counted every step"),
+        "body": Key("str", doc="body_crossing: the body's name"),
+        "name": Key("str", "", doc="names /checks/<name> in result.h5; default "
+                                   "<kind>_<body>"),
+    }, many=True, doc="a count of what must not happen, recorded every step"),
+}
+
+
+def check(case):
+    names = set()
+    bodies = {spec["name"] or f"body{k}": spec for k, spec in enumerate(case["body"])}
+    for k, spec in enumerate(case["check"]):
+        label = f"check[{k}]"
+        if spec["body"] not in bodies:
+            raise CaseError(f"{label}.body '{spec['body']}' is not a body of the case "
+                            f"({', '.join(bodies) or 'it has none'})")
+        body = bodies[spec["body"]]
+        if spec["kind"] == "body_crossing":
+            if body["type"] != "lattice" or min(body["nx"], body["ny"]) < 2:
+                raise CaseError(f"{label}.body '{spec['body']}' must be a lattice of at least "
+                                f"2 x 2 nodes: its mid-line runs along its longer side")
+            if not has_fluid(case):
+                raise CaseError(f"{label} counts fluid particles, but the case has no fluid")
+        spec["name"] = spec["name"] or f"{spec['kind']}_{spec['body']}"
+        if not re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.-]*", spec["name"]):
+            raise CaseError(f"{label}.name must be letters, digits, '_', '-' or '.' (it names "
+                            f"an HDF5 group), got {spec['name']!r}")
+        if spec["name"] in names:
+            raise CaseError(f"{label}.name '{spec['name']}' is used by an earlier check")
+        names.add(spec["name"])

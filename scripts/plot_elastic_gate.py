@@ -1,0 +1,110 @@
+#!/usr/bin/env python3
+"""Plot the elastic gate's free-end displacement and snapshots of a run of cases/elastic_gate.toml.
+
+    scripts/plot_elastic_gate.py OUT [--png docs/elastic_gate.png] [--experiment FILE.csv]
+
+OUT is the run's output directory (or its result.h5). The upper panel is the free end's
+horizontal and vertical displacement (the displacement probe, every step; the
+validation's metric, validation/elastic_gate/), with the crossings of the gate counted
+every step; the lower row shows the particles at four times. ``--experiment`` adds a
+measured curve: a CSV with columns t [s], dx [m], dy [m] (either may be empty).
+"""
+
+import argparse
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from parmps import validation  # noqa: E402
+from parmps.core.particles import FLUID, SOLID  # noqa: E402
+from parmps.tools import analysis  # noqa: E402
+
+
+def frames_near(path, times):
+    """(time, fluid positions, node positions) of the frame nearest each of ``times``."""
+    import h5py
+    out = []
+    with h5py.File(path, "r") as handle:
+        names = sorted(handle["frames"])
+        stamps = np.array([handle["frames"][n].attrs["time"] for n in names])
+        for t in times:
+            group = handle["frames"][names[int(np.argmin(np.abs(stamps - t)))]]
+            kind = group["kind"][()]
+            position = group["position"][()]
+            out.append((float(group.attrs["time"]), position[kind == FLUID],
+                        position[kind == SOLID], position[(kind != FLUID) & (kind != SOLID)]))
+    return out
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("output", help="the run's output directory or its result.h5")
+    parser.add_argument("--png", default=os.path.join(ROOT, "docs", "elastic_gate.png"))
+    parser.add_argument("--experiment", default=None, help="CSV: t, dx, dy (measured)")
+    args = parser.parse_args()
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    path = args.output if args.output.endswith(".h5") else os.path.join(args.output,
+                                                                         "result.h5")
+    check = validation.load("elastic_gate")
+    measured = check.measure(path)
+    case = analysis.result_case(path)
+
+    figure = plt.figure(figsize=(10, 5.6), dpi=110)
+    grid = figure.add_gridspec(2, 4, height_ratios=(1.6, 0.8))
+    ax = figure.add_subplot(grid[0, :])
+    ax.plot(measured["time"], 1e3 * measured["dx"], color="C0",
+            label="horizontal (parmps)")
+    ax.plot(measured["time"], 1e3 * measured["dy"], color="C1", label="vertical (parmps)")
+    if args.experiment:
+        data = np.genfromtxt(args.experiment, delimiter=",", comments="#", names=True)
+        columns = data.dtype.names
+        ax.plot(data[columns[0]], 1e3 * data[columns[1]], "o", color="C0", ms=3,
+                label="horizontal (experiment)")
+        if len(columns) > 2:
+            ax.plot(data[columns[0]], 1e3 * data[columns[2]], "s", color="C1", ms=3,
+                    label="vertical (experiment)")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("free-end displacement [mm]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    spacing = case["particles"]["spacing"]
+    ax.set_title(f"elastic gate (Antoci et al. 2007 set-up), l0 = {1e3 * spacing:.3g} mm: "
+                 f"max dx = {1e3 * measured['dx_max']:.1f} mm at t = "
+                 f"{measured['t_dx_max']:.3f} s; fluid crossings {measured['crossings']}, "
+                 f"max area error {measured['volume_error']:.1e}", fontsize=9)
+    if not args.experiment:
+        ax.text(0.99, 0.03, "the experiment's curve is not among the reference data",
+                transform=ax.transAxes, ha="right", fontsize=7, color="0.4")
+    end = measured["end"]
+    for k, (t, fluid, nodes, walls) in enumerate(frames_near(path, np.linspace(0.1, 1.0, 4)
+                                                             * end)):
+        panel = figure.add_subplot(grid[1, k])
+        panel.scatter(walls[:, 0], walls[:, 1], s=0.3, c="0.6", lw=0)
+        panel.scatter(fluid[:, 0], fluid[:, 1], s=0.3, c="C0", lw=0)
+        panel.scatter(nodes[:, 0], nodes[:, 1], s=1.0, c="C3", lw=0)
+        panel.set_xlim(-0.01, 0.3)
+        panel.set_ylim(-0.01, 0.16)
+        panel.set_aspect("equal")
+        panel.set_title(f"t = {t:.3f} s", fontsize=8)
+        panel.tick_params(labelsize=6)
+    figure.text(0.01, 0.005, f"python scripts/plot_elastic_gate.py OUT after "
+                f"mpirun -n 2 python -m parmps cases/elastic_gate.toml -o OUT",
+                fontsize=6, color="0.4")
+    figure.tight_layout(rect=(0, 0.02, 1, 1))
+    figure.savefig(args.png)
+    print(f"{args.png}: dx_max {measured['dx_max']:.4g} m at t = {measured['t_dx_max']:.4g} s, "
+          f"dy_max {measured['dy_max']:.4g} m, crossings {measured['crossings']}, "
+          f"area error {measured['volume_error']:.3g}, end {measured['end']:.4g} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
