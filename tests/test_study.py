@@ -43,9 +43,12 @@ def test_quick_study_writes_a_finite_report(tmp_path):
     tolerance = validation.load("dam_break").tolerance["rms_coarse"]
     for r in dam:
         assert 0 < r["rms"] < tolerance and 0 < r["rms_shifted"] <= r["rms"]
-    # The same dam break on 1 and 2 ranks gives the same front (rank-count independence).
+    # The same dam break on 1 and 2 ranks gives the same front. The study runs at the
+    # default solver tolerance (pressure.rtol = 1e-6), at which 1 and 2 ranks' pressures
+    # differ by about that much (3e-6 in this front); agreement to round-off at
+    # -pressure_ksp_rtol 1e-12 is tests/test_parallel.py's.
     by_rank = {r["ranks"]: r["rms"] for r in dam if r["m"] == max(x["m"] for x in dam)}
-    assert math.isclose(by_rank[1], by_rank[2], rel_tol=1e-6)
+    assert math.isclose(by_rank[1], by_rank[2], rel_tol=1e-4)
     # Stiff springs get more automatic substeps and stay stable.
     stiff = report["results"]["stiffness"]
     assert all(r["status"] == 0 for r in stiff)
