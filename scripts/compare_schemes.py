@@ -137,8 +137,7 @@ def box(label, overrides, spacing, directory, ranks):
         with h5py.File(result, "r") as handle:
             last = sorted(handle["frames"])[-1]
             nodes = handle["frames"][last]["solids/box/position"][()]
-        x = nodes[:45, 0].reshape(9, 5)
-        record["bend"] = float(-(x[4].mean() - 0.5 * (x[0].mean() + x[-1].mean())))
+        record["bend"] = float(analysis.lattice_bend(nodes, case["body"][0]))
         record["bend_time"] = float(np.round(case["time"]["end"], 6))
     return record
 

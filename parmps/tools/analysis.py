@@ -257,6 +257,17 @@ def volume_error(path, case):
     return {"volume_error": max(bodies.values()) if bodies else 0.0, "bodies": bodies}
 
 
+def lattice_bend(nodes, body):
+    """How far a lattice body's middle row runs ahead of its end rows along -x.
+
+    ``nodes`` are the body's node positions (node i + nx j, row by row from below);
+    > 0 for a body bent into a cup open towards +x (the box in flow's parachute).
+    """
+    nx, ny = body["nx"], body["ny"]
+    x = nodes[:nx * ny, 0].reshape(ny, nx)
+    return -(x[ny // 2].mean() - 0.5 * (x[0].mean() + x[-1].mean()))
+
+
 def lattice_top_middle(body):
     """Index of a lattice body's top-row middle node (node i + nx j, row by row from below)."""
     return body["nx"] * (body["ny"] - 1) + body["nx"] // 2
