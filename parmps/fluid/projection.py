@@ -63,6 +63,13 @@ class PressureStep:
     number_density: np.ndarray
     unknown_index: np.ndarray
 
+    def number_density_at(self, position, radius):
+        """The number density of the owned rows with the particles at ``position``
+        (owned, then ghosts; e.g. the start of the step), over this step's pair list."""
+        density, _ = kernels.number_density(self.indptr, self.cols, position, radius,
+                                            self.n_owned)
+        return density
+
 
 class FluidSolver:
     """The MPS projection step for a case: its constants, its schemes, its pressure solver.

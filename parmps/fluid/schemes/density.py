@@ -8,14 +8,19 @@ deviation corrected in one step makes the pressure noisy).
 from parmps.config import Key
 
 
-class DensitySource:
-    KEYS = {"relaxation": Key("float", 0.2, gt=0.0, le=1.0,
-                              doc="gamma: fraction of the number-density deviation "
-                                  "corrected per step")}
+class RelaxedSource:
+    """A source with a pull back to n0 of relaxation gamma, ``[mps.<name>] relaxation``
+    (each subclass's KEYS give its default)."""
 
     def __init__(self, settings, constants):
         self.relaxation = settings["relaxation"]
         self.constants = constants
+
+
+class DensitySource(RelaxedSource):
+    KEYS = {"relaxation": Key("float", 0.2, gt=0.0, le=1.0,
+                              doc="gamma: fraction of the number-density deviation "
+                                  "corrected per step")}
 
     def rhs(self, step):
         c = self.constants

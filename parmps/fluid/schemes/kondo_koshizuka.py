@@ -23,7 +23,7 @@ relaxation gamma: rho/dt^2 gamma (n - n0)/n0.
 import numpy as np
 
 from parmps.config import Key
-from parmps.core import kernels
+from parmps.fluid.schemes.density import RelaxedSource
 
 
 def source_term(number_density_current, number_density_predicted, n0, density, dt, relaxation):
@@ -47,7 +47,7 @@ def second_difference_source_term(number_density_previous, number_density_curren
                                   + relaxation * (current - n0)) / n0
 
 
-class DensityAccelerationSource:
+class DensityAccelerationSource(RelaxedSource):
     """The second-difference reading, registered as ``density_acceleration``.
 
     n^{k-1} is the number density one step back along the current velocities,
@@ -61,18 +61,12 @@ class DensityAccelerationSource:
     KEYS = {"relaxation": Key("float", 0.01, gt=0.0, le=1.0,
                               doc="gamma of the pull back to n0")}
 
-    def __init__(self, settings, constants):
-        self.relaxation = settings["relaxation"]
-        self.constants = constants
-
     def rhs(self, step):
         c = self.constants
         index = step.unknown_index
-        current, _ = kernels.number_density(step.indptr, step.cols, step.position,
-                                            c.re_number_density, step.n_owned)
-        previous, _ = kernels.number_density(step.indptr, step.cols,
-                                             step.position - step.dt * step.velocity,
-                                             c.re_number_density, step.n_owned)
+        current = step.number_density_at(step.position, c.re_number_density)
+        previous = step.number_density_at(step.position - step.dt * step.velocity,
+                                          c.re_number_density)
         return second_difference_source_term(previous[index], current[index],
                                              step.number_density[index], c.n0, c.density,
                                              step.dt, self.relaxation)

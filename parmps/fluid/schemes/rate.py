@@ -16,7 +16,6 @@ of a linear velocity field on the initial lattice exactly -n0 div u.
 """
 
 from parmps.config import Key
-from parmps.core import kernels
 from parmps.fluid.schemes.khayyer_gotoh import error_compensating_source, number_density_rate
 
 RATE_NORMALISATIONS = ("paper", "lattice")
@@ -49,8 +48,7 @@ class CompensatedRateSource(DensityRateSource):
     def rhs(self, step):
         c = self.constants
         index = step.unknown_index
-        current_density, _ = kernels.number_density(step.indptr, step.cols, step.position,
-                                                    c.re_number_density, step.n_owned)
+        current_density = step.number_density_at(step.position, c.re_number_density)
         current_rate = number_density_rate(step.indptr, step.cols, step.position,
                                            step.velocity, c.re_number_density, step.n_owned)
         compensation = error_compensating_source(current_density[index],
