@@ -195,3 +195,18 @@ def test_the_last_pressure_of_a_run_is_not_a_spike(tmp_path):
     before, last = (frames[-2]["pressure"].max(), frames[-1]["pressure"].max())
     # rho g H = 1962 Pa; the column still settles at 0.05 s: its peak swings by 10 %.
     assert last < 1.2 * before, (before, last)
+
+
+def test_a_preconditioner_is_renewed_once_a_solve_costs_more_than_the_average_since_its_setup():
+    from parmps.fluid.ppe import keep_preconditioner
+    # Set-up worth 40 iterations, then solves of 10: the average per solve falls
+    # (50, 30, 23.3, ...) and a solve of 10 stays below it: keep.
+    assert keep_preconditioner(0, 10, 10, 40.0, 50)
+    assert keep_preconditioner(3, 40, 10, 40.0, 50)
+    # Solves grown to 25 after 4 of 10, 12, 15, 20 (average (40 + 57)/4 = 24.25): renew.
+    assert not keep_preconditioner(3, 57, 25, 40.0, 50)
+    # A free set-up is renewed as soon as a solve costs more than the mean.
+    assert not keep_preconditioner(1, 20, 11, 0.0, 50)
+    # Never more than the limit of reuses; a limit of 0 sets up every solve.
+    assert not keep_preconditioner(50, 500, 1, 40.0, 50)
+    assert not keep_preconditioner(0, 10, 1, 40.0, 0)

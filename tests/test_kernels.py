@@ -300,3 +300,58 @@ def test_sort_row_columns_sorts_each_row_with_its_values():
         part = columns[row_ptr[row]:row_ptr[row + 1]]
         assert np.all(np.diff(part) > 0)
     np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
+
+
+def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are_identical(
+        scene):
+    position, velocity, pressure, is_dummy, n, indptr, cols, _ = scene
+    radius = 2.1 * SPACING
+    d = position.shape[1]
+    near_indptr, near_cols = kernels.pairs_within(indptr, cols, position, radius, n)
+    for i in range(n):
+        full = cols[indptr[i]:indptr[i + 1]]
+        inside = full[((position[full] - position[i]) ** 2).sum(axis=1) < radius ** 2]
+        assert np.array_equal(near_cols[near_indptr[i]:near_indptr[i + 1]], inside)
+    assert near_indptr[-1] < 0.6 * indptr[-1]
+    # Bit for bit: the pairs left out weigh exactly 0 in every sum on this radius.
+    for over_full, over_near in zip(
+            kernels.number_density(indptr, cols, position, radius, n),
+            kernels.number_density(near_indptr, near_cols, position, radius, n)):
+        assert np.array_equal(over_full, over_near)
+    assert np.array_equal(kernels.divergence_sum(indptr, cols, position, velocity, radius, n),
+                          kernels.divergence_sum(near_indptr, near_cols, position, velocity,
+                                                 radius, n))
+    include = ~is_dummy
+    full = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
+    near = kernels.pressure_gradient_sum(near_indptr, near_cols, position, pressure, include,
+                                         radius, n)
+    assert np.array_equal(full, near)
+    n0, _ = reference_values(SPACING, radius, d)
+    kernels.correct_gradient(indptr, cols, position, include, radius, d / n0, full, 0.5)
+    kernels.correct_gradient(near_indptr, near_cols, position, include, radius, d / n0, near,
+                             0.5)
+    assert np.array_equal(full, near)
+
+
+def test_pairs_within_keeps_a_pair_a_rounding_error_inside_the_radius():
+    # |r| = 0.3 exactly cannot be held in binary: sqrt(r^2) and r^2 against radius^2
+    # may disagree in the last bit, and the sub-list must keep the pair either way.
+    position = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.3]])
+    indptr, cols = pair_list(position, 1.0)
+    for radius in (0.1, 0.3, np.nextafter(0.1, 1.0), np.nextafter(0.3, 1.0)):
+        near_indptr, near_cols = kernels.pairs_within(indptr, cols, position, radius, 3)
+        for i in range(3):
+            kept = set(near_cols[near_indptr[i]:near_indptr[i + 1]])
+            for j in cols[indptr[i]:indptr[i + 1]]:
+                distance = np.sqrt(((position[j] - position[i]) ** 2).sum())
+                if distance < radius:
+                    assert j in kept
+
+
+@pytest.mark.parametrize("expected_pairs", [0, 1, 1000, 10 ** 6])
+def test_pair_list_is_the_same_whatever_room_it_is_given(scene, expected_pairs):
+    position, _, _, _, n, indptr, cols, _ = scene
+    got_indptr, got_cols = pair_list(position, 3.7 * SPACING, n_rows=n,
+                                     expected_pairs=expected_pairs)
+    assert np.array_equal(got_indptr, indptr)
+    assert np.array_equal(got_cols, cols)

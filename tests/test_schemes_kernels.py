@@ -402,11 +402,13 @@ def _step(position, velocity, position_star, velocity_star, constants, dt=DT):
     indptr, cols = pair_list(position, constants.search_radius)
     density_star, _ = kernels.number_density(indptr, cols, position_star,
                                              constants.re_number_density, n)
+    near_indptr, near_cols = kernels.pairs_within(indptr, cols, position_star,
+                                                  constants.re_number_density, n)
     inside = np.flatnonzero(interior(position, 4 * SPACING))
     return PressureStep(dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
                         velocity=velocity, position_star=position_star,
                         velocity_star=velocity_star, number_density=density_star,
-                        unknown_index=inside)
+                        unknown_index=inside, near_indptr=near_indptr, near_cols=near_cols)
 
 
 def test_lattice_normalised_hs_is_the_divergence_source_for_a_linear_field():

@@ -32,6 +32,21 @@ def _weight(distance, radius):
     return radius / distance - 1.0
 
 
+# A relative margin on r^2 for cuts made before the square root (pairs_within, and
+# _weight_of_r2's early exit): a kernel tests its radius as sqrt(r^2) < radius or
+# r^2 < radius^2, which can disagree in the last bit, so a cut this much wider keeps
+# every pair any kernel would weigh, and their sums stay bit for bit the same.
+PAIRS_WITHIN_MARGIN = 1e-12
+
+
+@numba.njit(cache=True, inline="always")
+def _weight_of_r2(r2, radius):
+    """_weight(sqrt(r2), radius), without the square root for pairs clearly outside."""
+    if r2 >= radius * radius * (1.0 + PAIRS_WITHIN_MARGIN):
+        return 0.0
+    return _weight(np.sqrt(r2), radius)
+
+
 @numba.njit(cache=True, inline="always")
 def pair_distance2(position, i, j, d):
     """|r_ij|^2 for r_ij = x_j - x_i, summed over the d components in order."""
@@ -65,7 +80,7 @@ def _number_density(indptr, cols, position, radius, n_rows, d):
         within = 0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
             if w > 0.0:
                 total += w
                 within += 1
@@ -83,6 +98,40 @@ def number_density(indptr, cols, position, radius, n_rows):
     return _number_density(indptr, cols, position, radius, n_rows, 3)
 
 
+# --- pairs within a smaller radius ------------------------------------------------------------
+
+@numba.njit(cache=True, inline="always")
+def _pairs_within(indptr, cols, position, radius, n_rows, d):
+    limit2 = radius * radius * (1.0 + PAIRS_WITHIN_MARGIN)
+    near_indptr = np.zeros(n_rows + 1, np.int64)
+    near_cols = np.empty(indptr[n_rows], np.int64)
+    total = 0
+    for i in range(n_rows):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if pair_distance2(position, i, j, d) < limit2:
+                near_cols[total] = j
+                total += 1
+        near_indptr[i + 1] = total
+    return near_indptr, near_cols[:total].copy()
+
+
+@numba.njit(cache=True)
+def pairs_within(indptr, cols, position, radius, n_rows):
+    """The sub-list of the CSR pair list (rows [0, n_rows)) whose pairs lie within
+    ``radius`` at ``position``, in the same order.
+
+    The search radius covers the Laplacian's radius plus a skin, so it holds about
+    three times the pairs of the number density's radius: the operators on that
+    radius (number density, divergence, gradient and its correction) visit a
+    third of the pairs over this list and give bit for bit the same sums.
+    """
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _pairs_within(indptr, cols, position, radius, n_rows, 2)
+    return _pairs_within(indptr, cols, position, radius, n_rows, 3)
+
+
 # --- viscous term -----------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")
@@ -93,7 +142,7 @@ def _vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows, d
             continue
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            w = _weight(np.sqrt(pair_distance2(position, i, j, d)), radius)
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
             if w > 0.0:
                 for k in range(d):
                     out[i, k] += (field[j, k] - field[i, k]) * w
@@ -122,7 +171,7 @@ def _divergence_sum(indptr, cols, position, field, radius, n_rows, d):
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             r2 = pair_distance2(position, i, j, d)
-            w = _weight(np.sqrt(r2), radius)
+            w = _weight_of_r2(r2, radius)
             if w > 0.0:
                 projected = 0.0
                 for k in range(d):
@@ -163,7 +212,7 @@ def _pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radiu
             if not has_pressure[j]:
                 continue
             r2 = pair_distance2(position, i, j, d)
-            w = _weight(np.sqrt(r2), radius)
+            w = _weight_of_r2(r2, radius)
             if w > 0.0:
                 factor = (pressure[j] - minimum) * w / r2
                 for k in range(d):
@@ -261,7 +310,7 @@ def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradi
             if not has_pressure[j]:
                 continue
             r2 = pair_distance2(position, i, j, d)
-            w = _weight(np.sqrt(r2), radius)
+            w = _weight_of_r2(r2, radius)
             if w > 0.0:
                 for k in range(d):
                     for m in range(k, d):
@@ -394,34 +443,23 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
     for i in range(n_owned):
         if row_number[i] >= 0:
             n_rows += 1
+    # One pass, into room for every pair of the list: a row cannot hold more.
     row_ptr = np.zeros(n_rows + 1, np.int64)
+    columns = np.empty(indptr[n_owned] + n_rows, np.int64)
+    values = np.empty(indptr[n_owned] + n_rows)
     k = 0
+    place = 0
     for i in range(n_owned):
         if row_number[i] < 0:
             continue
-        length = 1
-        if is_unknown[i]:
-            for p in range(indptr[i], indptr[i + 1]):
-                j = cols[p]
-                if row_number[j] < 0 or not is_unknown[j]:
-                    continue
-                if _laplacian_weight(pair_distance2(position, i, j, d), radius,
-                                     inverse_cube) > 0.0:
-                    length += 1
-        row_ptr[k + 1] = row_ptr[k] + length
-        k += 1
-    columns = np.empty(row_ptr[n_rows], np.int64)
-    values = np.empty(row_ptr[n_rows])
-    k = 0
-    for i in range(n_owned):
-        if row_number[i] < 0:
-            continue
-        columns[row_ptr[k]] = row_number[i]
+        start = place
+        columns[start] = row_number[i]
+        place += 1
         if not is_unknown[i]:
-            values[row_ptr[k]] = dirichlet_diagonal
+            values[start] = dirichlet_diagonal
             k += 1
+            row_ptr[k] = place
             continue
-        place = row_ptr[k] + 1
         diagonal = diagonal_shift
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
@@ -437,8 +475,11 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
                 columns[place] = row_number[j]
                 values[place] = -pair
                 place += 1
-        values[row_ptr[k]] = diagonal
+        values[start] = diagonal
         k += 1
+        row_ptr[k] = place
+    columns = columns[:place]
+    values = values[:place]
     return row_ptr, columns, values
 
 

@@ -27,9 +27,13 @@ def _cell_coordinates(position, origin, cell_size):
 
 
 @numba.njit(cache=True, inline="always")
-def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
-              indptr, indices, rows, d):
+def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
+              indices, rows, d):
     """Pairs of rows [0, n_rows) within ``radius``, over the 3^d cells around each row.
+
+    Fills ``indptr`` and as many pairs as ``indices`` has room for, and returns
+    the number of pairs found: more than ``len(indices)`` means the list is
+    incomplete and the search must run again with that room.
 
     Cells are numbered key = sum_k cell_k stride_k with stride_0 = 1, so the
     cells that differ in the first coordinate only are consecutive and their
@@ -40,13 +44,11 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
     lo = np.empty(d, np.int64)
     hi = np.empty(d, np.int64)
     at = np.empty(d, np.int64)
+    room = indices.shape[0]
     total = 0
     for i in range(n_rows):
-        if not count_only:
-            total = indptr[i]
         if rows is not None and not rows[i]:
-            if count_only:
-                indptr[i + 1] = total
+            indptr[i + 1] = total
             continue
         for k in range(d):
             lo[k] = max(cell[i, k] - 1, 0)
@@ -65,7 +67,7 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
                     delta = position[j, k] - position[i, k]
                     r2 += delta * delta
                 if r2 < radius2:
-                    if not count_only:
+                    if total < room:
                         indices[total] = j
                     total += 1
             # The next run of cells: count up the coordinates 1 .. d-1 like an odometer.
@@ -78,31 +80,33 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
                 k += 1
             if k == d:
                 break
-        if count_only:
-            indptr[i + 1] = total
+        indptr[i + 1] = total
     return total
 
 
 @numba.njit(cache=True)
-def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, count_only,
-            indptr, indices, rows):
+def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr, indices,
+            rows):
     # d as a literal, so the component loops unroll (see parmps.core.kernels).
     if position.shape[1] == 2:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         count_only, indptr, indices, rows, 2)
+                         indptr, indices, rows, 2)
     if position.shape[1] == 3:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         count_only, indptr, indices, rows, 3)
+                         indptr, indices, rows, 3)
     return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                     count_only, indptr, indices, rows, position.shape[1])
+                     indptr, indices, rows, position.shape[1])
 
 
-def pair_list(position, radius, n_rows=None, rows=None):
+def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
     """CSR neighbour lists (indptr, indices) of rows [0, n_rows) against every particle.
 
     ``position`` is (N, d) for any d >= 1; the cells are d-dimensional. ``rows``:
     optional mask (length >= n_rows) of the rows to search; the others get empty
     lists (they still appear as neighbours of the rows searched).
+    ``expected_pairs``: room to fill in one pass (e.g. a little more than the last
+    step's count); the search runs a second time only when the pairs overflow it,
+    and the result is the same either way.
     """
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = len(position)
@@ -124,12 +128,14 @@ def pair_list(position, radius, n_rows=None, rows=None):
     key = cell @ stride
     order = np.argsort(key, kind="stable")
     cell_start = np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
-    _search(position, n_rows, radius, cells, stride, order, cell_start, cell, True, indptr,
-            np.empty(0, np.int64), rows)
-    indices = np.empty(indptr[-1], np.int64)
-    _search(position, n_rows, radius, cells, stride, order, cell_start, cell, False, indptr,
-            indices, rows)
-    return indptr, indices
+    indices = np.empty(max(int(expected_pairs), 0), np.int64)
+    total = _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
+                    indices, rows)
+    if total > len(indices):
+        indices = np.empty(total, np.int64)
+        _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
+                indices, rows)
+    return indptr, indices[:total]
 
 
 def rows_of(indptr):

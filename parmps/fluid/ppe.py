@@ -152,8 +152,10 @@ class PressureSolver:
         self.ksp = self._make_ksp()
         self.sizes = None
         self.reuse_limit = settings["reuse_preconditioner"]
+        self.setup_cost = settings["setup_cost"]
         self.preconditioner_age = 0
         self.fresh_iterations = None
+        self.iterations_since_setup = 0
         self.last_iterations = 0
         self.setups = 0
 
@@ -264,12 +266,10 @@ class PressureSolver:
             self.ksp = self._make_ksp()
             self.sizes = matrix.getSizes()
             self.fresh_iterations = None
-        # The AMG hierarchy of a recent matrix preconditions this one well while
-        # particles move little; set it up again every few steps, or sooner when
-        # CG needs clearly more iterations than right after a set-up.
         reuse = (self.fresh_iterations is not None
-                 and self.preconditioner_age < self.reuse_limit
-                 and self.last_iterations <= 1.5 * self.fresh_iterations + 2)
+                 and keep_preconditioner(self.preconditioner_age, self.iterations_since_setup,
+                                         self.last_iterations, self.setup_cost,
+                                         self.reuse_limit))
         self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(matrix)
         # The first solve sets the preconditioner up, which reads the rest of the options.
@@ -283,8 +283,10 @@ class PressureSolver:
         self.last_iterations = iterations
         if reuse:
             self.preconditioner_age += 1
+            self.iterations_since_setup += iterations
         else:
             self.preconditioner_age = 0
+            self.iterations_since_setup = iterations
             self.fresh_iterations = iterations
             self.setups += 1
         for item in (matrix, b, x):
@@ -297,6 +299,21 @@ class PressureSolver:
 
     def destroy(self):
         self.ksp.destroy()
+
+
+def keep_preconditioner(reuses, iterations_since_setup, last_iterations, setup_cost, limit):
+    """Whether the next solve should reuse the preconditioner set up ``reuses`` solves ago.
+
+    The AMG hierarchy of a recent matrix preconditions this one well while the
+    particles move little, and less well as they move on. A set-up is paid for by
+    the solves that reuse it, so it is renewed once the last solve took more
+    iterations than the average cost per solve since the set-up (the set-up
+    counted as ``setup_cost`` iterations; ``iterations_since_setup`` includes the
+    set-up's own solve): from then on that average could only grow. At most
+    ``limit`` reuses. Iteration counts, not timings, so every run decides alike.
+    """
+    average = (setup_cost + iterations_since_setup) / (reuses + 1)
+    return reuses < limit and last_iterations <= average
 
 
 def _reason_name(PETSc, reason):

@@ -50,9 +50,13 @@ SECTIONS = {
         "rtol": Key("float", 1.0e-6, gt=0.0, lt=1.0,
                     doc="CG stops at this residual relative to the right-hand side"),
         "max_iterations": Key("int", 1000, gt=0),
-        "reuse_preconditioner": Key("int", 4, ge=0,
-                                    doc="steps a preconditioner set-up is reused for "
+        "reuse_preconditioner": Key("int", 50, ge=0,
+                                    doc="most steps a preconditioner set-up is reused for "
                                         "(0: set up every step)"),
+        "setup_cost": Key("float", 40.0, ge=0.0,
+                          doc="what a preconditioner set-up costs, in CG iterations: it is "
+                              "set up again once a step's iterations exceed the average "
+                              "cost per step since the last set-up"),
         "ksp_type": Key("str", "cg"),
         "pc_type": Key("str", "gamg"),
         "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),

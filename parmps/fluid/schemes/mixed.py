@@ -23,7 +23,7 @@ class MixedSource(RelaxedSource):
         index = step.unknown_index
         current_density = step.number_density_at(step.position, c.re_number_density)
         divergence = (c.dimension / c.n0) * kernels.divergence_sum(
-            step.indptr, step.cols, step.position_star, step.velocity_star,
+            step.near_indptr, step.near_cols, step.position_star, step.velocity_star,
             c.re_number_density, step.n_owned)
         return (-(c.density / step.dt) * divergence[index]
                 + self.relaxation * (c.density / step.dt ** 2)

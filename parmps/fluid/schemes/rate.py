@@ -39,7 +39,7 @@ class DensityRateSource:
 
     def rhs(self, step):
         c = self.constants
-        rate = number_density_rate(step.indptr, step.cols, step.position_star,
+        rate = number_density_rate(step.near_indptr, step.near_cols, step.position_star,
                                    step.velocity_star, c.re_number_density, step.n_owned)
         return (self.scale * c.density / (c.n0 * step.dt)) * rate[step.unknown_index]
 
