@@ -8,9 +8,20 @@ PARTICLE_SECTIONS = ("fluid_block", "tank", "wall_box", "inlet", "outlet")
 
 SECTIONS = {
     "domain": Section({
-        "lower": Key("vec2", doc="lower-left corner; every particle must lie inside"),
+        "lower": Key("vec2", doc="lower-left corner; every particle must start inside"),
         "upper": Key("vec2", doc="upper-right corner"),
-    }, required=True, doc="the box that holds every particle for the whole run"),
+        "escaped_fluid": Key("str", "remove", choices=("remove", "stop"),
+                             doc="a fluid particle outside the box after a step: \"remove\" "
+                                 "drops it and the run goes on (spray thrown over a wall), "
+                                 "counted in the diagnostics' n_escaped; \"stop\" stops the "
+                                 "run. Any other particle outside always stops it"),
+        "max_escaped_fraction": Key("float", 0.01, ge=0.0, le=1.0,
+                                    doc="with escaped_fluid = \"remove\", the run stops once "
+                                        "more than this fraction of the fluid particles at "
+                                        "t = 0 has left: a flood is a leak or an unstable run, "
+                                        "not spray"),
+    }, required=True, doc="the box that holds the particles; fluid leaving it is removed or "
+                          "stops the run (escaped_fluid)"),
     "particles": Section({
         "spacing": Key("float", None, gt=0.0,
                        doc="initial particle spacing l0 [m]; needed by any case with fluid "

@@ -12,7 +12,7 @@ import time as wallclock
 
 import numpy as np
 
-from parmps.core.particles import KIND_NAMES
+from parmps.core.particles import FLUID, KIND_NAMES
 from parmps.core.settings import has_fluid
 from parmps.io.checkpoint import write_checkpoint
 from parmps.io.frames import FrameWriter
@@ -102,7 +102,8 @@ class Simulation:
         # The order is the order of the hooks within a step.
         participants = [p for p in (moving_walls, self.coupling, open_boundaries)
                         if p is not None]
-        self.stepper = FluidStepper(case, comm, self.decomposition, self.fluid, participants)
+        self.stepper = FluidStepper(case, comm, self.decomposition, self.fluid, participants,
+                                    initial_fluid=self.counts.get(KIND_NAMES[FLUID], 0))
 
     # -- --check ----------------------------------------------------------------------------
 

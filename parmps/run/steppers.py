@@ -3,7 +3,8 @@
 A stepper has ``DIAGNOSTICS`` (its own columns, name -> dtype), ``start(state)``,
 ``dt_limits(state)`` (a list of :class:`~parmps.run.timestep.Limit`),
 ``advance(state, dt)`` (from ``state.time``; the step is ``state.step + 1``),
-``check(state)`` (after the step: stop loudly if it went wrong),
+``check(state)`` (after the step: stop loudly if it went wrong; the fluid stepper also
+drops the fluid that left the domain, :mod:`parmps.run.escaped`),
 ``failure_cause()`` (a sentence the loop adds to a failure's message, or None),
 ``diagnostics(state)`` and ``progress(state)`` (a progress line's text), and
 ``checkpoint_state()`` / ``restore_state(saved)`` for checkpoints.
@@ -24,6 +25,7 @@ from parmps.core.particles import FLUID
 from parmps.errors import RunFailure
 from parmps.fluid.projection import check_finite, max_speed
 from parmps.run import guards
+from parmps.run.escaped import EscapedFluid
 from parmps.run.timestep import Limit
 
 log = logging.getLogger(__name__)
@@ -35,18 +37,21 @@ class FluidStepper:
     DIAGNOSTICS = {"ksp_iterations": np.int64, "ksp_residual": np.float64,
                    "max_speed": np.float64, "kinetic_energy": np.float64,
                    "n_fluid": np.int64,
+                   # fluid particles that left the domain and were removed, cumulative
+                   "n_escaped": np.int64,
                    # largest rank's owned particle count over the mean
                    "imbalance": np.float64}
 
-    def __init__(self, case, comm, decomposition, fluid, participants):
+    def __init__(self, case, comm, decomposition, fluid, participants, initial_fluid):
+        """``initial_fluid``: the fluid particles at t = 0, the base of
+        ``domain.max_escaped_fraction``."""
         self.case = case
         self.comm = comm
         self.decomposition = decomposition
         self.fluid = fluid
         self.participants = list(participants)
         self.spacing = case["particles"]["spacing"]
-        self.lower = np.asarray(case["domain"]["lower"])
-        self.upper = np.asarray(case["domain"]["upper"])
+        self.escaped = EscapedFluid(case, comm, initial_fluid)
         self.DIAGNOSTICS = dict(self.DIAGNOSTICS)
         for participant in self.participants:
             self.DIAGNOSTICS.update(participant.DIAGNOSTICS)
@@ -54,13 +59,17 @@ class FluidStepper:
         self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0}
 
     def checkpoint_state(self):
-        """Every participant's state, by its name (collective)."""
-        return {p.name: p.checkpoint_state() for p in self.participants if p.name is not None}
+        """Every participant's state, by its name, and the escaped fluid's count (collective)."""
+        saved = {p.name: p.checkpoint_state() for p in self.participants if p.name is not None}
+        saved[self.escaped.name] = self.escaped.checkpoint_state()
+        return saved
 
     def restore_state(self, saved):
         for participant in self.participants:
             if participant.name is not None:
                 participant.restore_state(saved[participant.name])
+        # A checkpoint written before the count existed had removed none.
+        self.escaped.restore_state(saved.get(self.escaped.name, {"total": 0}))
 
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
@@ -116,45 +125,42 @@ class FluidStepper:
         state.particles = particles
 
     def check(self, state):
-        """Stop loudly on NaN, a particle leaving the domain or going through a wall, or a
-        Courant breach; measures the largest fluid speed for the next step."""
+        """Stop loudly on NaN, a particle leaving the domain (fluid is removed instead when
+        the case says so) or going through a wall, or a Courant breach; measures the
+        largest fluid speed for the next step."""
         comm = self.comm
         particles = state.particles
         step = state.step
         check_finite(particles, comm, step)
         for participant in self.participants:
             participant.check(particles, step, state.time)
-        n = particles.n_owned
-        position = particles.position[:n]
-        outside = outside_box(position, self.lower, self.upper)
-        local = (int(particles.id[:n][outside][0]),) + tuple(position[outside][0]) \
-            if np.any(outside) else None
-        escaped = [item for item in comm.allgather(local) if item is not None]
-        if escaped:
-            pid, *where = min(escaped)
-            at = ", ".join(f"{x:.4g}" for x in where)
-            for participant in self.participants:
-                owner = participant.particle_owner(pid)
-                if owner is not None:
-                    description, advice = owner
-                    raise RunFailure(f"step {step}: particle {pid} of {description} left the "
-                                     f"domain at ({at}); {advice}")
-            raise RunFailure(f"step {step}: particle {pid} left the domain at ({at}) "
-                             f"(through a wall, or the domain is too small)")
+        particles, escaped_speed = self.escaped.apply(particles, step, state.time,
+                                                      self.particle_owner)
+        state.particles = particles
         speed = max_speed(particles, comm)
-        courant = speed * state.dt / self.spacing
+        # The removed particles moved in this step too: one thrown out by a step too long
+        # is a Courant breach.
+        courant = max(speed, escaped_speed) * state.dt / self.spacing
         if courant > 1.0:
             fixed = self.case["time"]["fixed_dt"]
             advice = (f"; the fixed time.fixed_dt = {fixed:g} s breaks the Courant limit: lower "
                       f"it or set it to 0 for adaptive steps" if fixed > 0 else "")
             raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
-                             f"{speed:.4g} m/s, dt {state.dt:.3g} s): particles jump more than a "
+                             f"{max(speed, escaped_speed):.4g} m/s, dt {state.dt:.3g} s): particles jump more than a "
                              f"spacing per step; the run is unstable{advice}")
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),
                                       self.spacing, comm, step)
         self.fluid_speed = speed
+
+    def particle_owner(self, pid):
+        """The first participant's ``(description, advice)`` for particle ``pid``, or None."""
+        for participant in self.participants:
+            owner = participant.particle_owner(pid)
+            if owner is not None:
+                return owner
+        return None
 
     def diagnostics(self, state):
         comm = self.comm
@@ -168,6 +174,7 @@ class FluidStepper:
                   "ksp_residual": self.stats["ksp_residual"],
                   "max_speed": self.fluid_speed, "kinetic_energy": kinetic,
                   "n_fluid": comm.allreduce(int(np.count_nonzero(fluid))),
+                  "n_escaped": self.escaped.total,
                   "imbalance": self.decomposition.imbalance(particles)}
         for participant in self.participants:
             values.update(participant.diagnostics())
@@ -182,7 +189,7 @@ class FluidStepper:
         return f"ksp {self.stats['ksp_iterations']} its"
 
     def summary(self, state):
-        return ""
+        return self.escaped.summary()
 
 
 class SolidStepper:
