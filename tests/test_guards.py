@@ -41,9 +41,9 @@ def assert_readable_up_to(path, step, fields=("position", "velocity")):
 
 
 def test_fixed_dt_too_large_stops_at_the_step_with_the_courant_limit(tmp_path):
-    # The density source lets the first step through calmly, so the guard is seen
-    # stopping a run after good steps; the mixed source (the default) already
-    # breaks the limit in step 1, with the same message.
+    # The density source (the default, named here because the test depends on it) lets
+    # the first step through calmly, so the guard is seen stopping a run after good
+    # steps; the mixed source already breaks the limit in step 1, with the same message.
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.3",
                          "--set", 'mps.source="density"',
                          "--set", "time.fixed_dt=0.02", "--set", "time.output_interval=0.02"],
