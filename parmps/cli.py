@@ -141,8 +141,25 @@ def _verdict(comm, action):
     return result
 
 
+# parmps runs one MPI rank per core; a BLAS library that starts its own worker
+# threads (Debian's OpenBLAS, loaded with PETSc, spins one per rank in GAMG's
+# coarse solves) would put two busy threads on each core.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def one_blas_thread_per_rank(environ):
+    """Ask BLAS for a single thread unless the user has chosen a count.
+
+    Must run before PETSc (and with it OpenBLAS) is loaded: OpenBLAS reads the
+    variable once, when the library is loaded.
+    """
+    for variable in BLAS_THREAD_VARIABLES:
+        environ.setdefault(variable, "1")
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
+    one_blas_thread_per_rank(os.environ)
     ours, petsc_options = split_petsc_options(argv)
     debug = "--debug" in ours
     try:

@@ -193,7 +193,7 @@ def time_to_solution(spacing, ranks, end_time, overrides):
         particles = len(last["id"])
         tank = case["tank"][0]
         line.update({
-            "particles": particles, "wall_seconds": round(seconds, 2), "steps": steps,
+            "particles": particles, "wall_seconds": round(seconds, 3), "steps": steps,
             "us_per_particle_step": round(1e6 * seconds / (particles * steps), 3),
             "ksp_iterations": iterations,
             "cpu_seconds": round(after.ru_utime + after.ru_stime

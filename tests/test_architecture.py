@@ -2,6 +2,7 @@
 scoped PETSc options and the pressure gradient the coupling takes from the fluid."""
 
 import ast
+import os
 import importlib
 import pkgutil
 from pathlib import Path
@@ -225,3 +226,15 @@ def test_the_coupling_feels_the_fluids_corrected_gradient():
     np.testing.assert_allclose(force, by_fluid, rtol=1e-12)
     # The two gradients differ here by far more than rounding: the test tells them apart.
     assert np.abs(by_plain - by_fluid).max() > 1e-2 * np.abs(by_fluid).max()
+
+
+def test_one_blas_thread_per_rank_unless_the_user_chose(monkeypatch):
+    from parmps import cli
+    environ = {"OMP_NUM_THREADS": "3"}
+    cli.one_blas_thread_per_rank(environ)
+    assert environ == {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "3"}
+    # main() sets it before anything loads PETSc (and OpenBLAS with it).
+    for variable in cli.BLAS_THREAD_VARIABLES:
+        monkeypatch.delenv(variable, raising=False)
+    assert cli.main(["--help"]) == 0
+    assert all(os.environ[variable] == "1" for variable in cli.BLAS_THREAD_VARIABLES)

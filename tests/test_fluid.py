@@ -164,9 +164,13 @@ def test_dam_break_front_against_martin_moyce(tmp_path):
     result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--end-time", "0.33",
                          "--set", "time.output_interval=0.01"] + COARSE_DAM_BREAK, timeout=600)
     assert result.returncode == 0, result.stderr
-    # The simulated front leads the experiment most early on (T < 2), however fine l0 is.
-    rms = DAM_BREAK.measure(tmp_path / "result.h5")["rms"]
-    assert rms < DAM_BREAK.tolerance["rms"], rms
+    # The simulated front leads the experiment most early on (T < 2), however fine l0 is:
+    # the record's release and t = 0 are undefined, so its course is judged with the best
+    # constant delay, and the delay against the leads of other published codes.
+    measured = DAM_BREAK.measure(tmp_path / "result.h5")
+    assert measured["rms_delayed"] < DAM_BREAK.tolerance["rms_delayed"], measured
+    low, high = DAM_BREAK.tolerance["delay"]
+    assert low <= measured["delay"] <= high, measured
 
 
 def test_end_time_is_reached_without_a_short_last_step():
