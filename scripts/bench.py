@@ -23,7 +23,9 @@ close are not in it), ``steps``, ``us_per_particle_step`` (the loop's time over
 particles x steps), ``ksp_iterations`` (their total), ``cpu_seconds`` (user + system
 time of the whole job, every rank, start-up included: on a shared machine it moves
 less with the load than the wall time; MPI's busy waiting counts in it on 2 ranks),
-``load`` (the 1-minute load average at the start), and the surge front:
+``load`` (the 1-minute load average at the start), ``target_seconds`` and
+``within_target`` for the four runs that have a speed target
+(``TIME_TO_SOLUTION_TARGETS``, to t = 0.5 s), and the surge front:
 
 - ``front_m``: the leading edge on the floor at the end time, the largest x of the
   fluid particles whose centres lie within ``FLOOR_BAND`` (20 mm) of the floor,
@@ -53,6 +55,13 @@ PEER_SPACINGS = (0.005, 0.0025)
 FLOOR_BAND = 0.02
 # The comparison with Martin & Moyce stops before the front meets the right wall at Z = 4.
 FRONT_COMPARE_UNTIL = 2.8
+# Speed targets of --time-to-solution, (spacing, ranks) -> loop seconds to t = 0.5 s: half
+# of what the main of November 2026 (b2f74f8; density source, minimum gradient, cfl 0.2,
+# rtol 1e-8) took on a quiet 2-core AMD EPYC VM: 82, 57, 735 and 407 s. The machine's
+# timings drift by +-15 %, and by more under load: compare paired runs (README).
+TIME_TO_SOLUTION_TARGETS = {(0.005, 1): 41.0, (0.005, 2): 28.5,
+                            (0.0025, 1): 367.5, (0.0025, 2): 203.5}
+TARGET_END_TIME = 0.5
 
 
 def spacing_for(target):
@@ -207,6 +216,10 @@ def time_to_solution(spacing, ranks, end_time, overrides):
                 delay_range=dam_break.metric["delay_range"],
                 delay_step=dam_break.metric["delay_step"])
             line["front_rms"] = round(front["rms"], 4)
+        target = TIME_TO_SOLUTION_TARGETS.get((spacing, ranks))
+        if target is not None and end_time == TARGET_END_TIME:
+            line["target_seconds"] = target
+            line["within_target"] = seconds <= target
         if overrides:
             line["set"] = list(overrides)
         return line
