@@ -75,9 +75,9 @@ CASES_WITH_ERRORS.update({
     "misspelt motion key": (_tank_with("move_stop = 1.0"),
                             "unknown key 'tank[0].move_stop' (did you mean 'move_start'?)"),
     "fixed dt too long for a wall": (
-        BASE.replace("dt_max = 1.0e-3", "fixed_dt = 5.0e-3") + BOX + "velocity = [0.0, 1.0]\n",
+        BASE.replace("dt_max = 1.0e-3", "fixed_dt = 6.0e-3") + BOX + "velocity = [0.0, 1.0]\n",
         "wall_box[0].velocity: a wall moving at 1 m/s needs dt <= time.cfl x spacing / speed "
-        "= 0.004 s, but time.fixed_dt is 0.005 s"),
+        "= 0.005 s, but time.fixed_dt is 0.006 s"),
     "moving wall leaving the domain": (
         _tank_with("velocity = [0.0, 0.1]"),
         # The tank's top wall particles (y = 0.295) reach the domain's y = 0.36 at 0.65 s.

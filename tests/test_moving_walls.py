@@ -151,8 +151,8 @@ def test_check_takes_the_wall_speed_into_the_first_step(tmp_path):
                     .replace("move_start = 0.0104", "move_start = 0.0"))
     result = run_parmps([path, "--check"], timeout=60)
     assert result.returncode == 0, result.stderr
-    # dt = cfl l0 / |v| = 0.4 x 0.01 / 8 (the default cfl).
-    assert json.loads(result.stdout)["initial_dt"] == pytest.approx(5.0e-4, rel=1e-12)
+    # dt = cfl l0 / |v| = 0.5 x 0.01 / 8 (the default cfl).
+    assert json.loads(result.stdout)["initial_dt"] == pytest.approx(6.25e-4, rel=1e-12)
 
 
 def _piston_frames(path):

@@ -98,8 +98,13 @@ class Particles:
                          self.dimension)
 
     def owned(self):
-        """The owned particles alone, without ghosts (a copy)."""
+        """The owned particles alone, without ghosts (its arrays are views of these)."""
         return self.select(slice(0, self.n_owned))
+
+    def owned_copy(self):
+        """The owned particles alone, in arrays of their own."""
+        return Particles({name: array[:self.n_owned].copy()
+                          for name, array in self.arrays.items()}, None, self.dimension)
 
     @staticmethod
     def concatenate(parts, n_owned=None, dimension=DEFAULT_DIMENSION):
