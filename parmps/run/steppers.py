@@ -146,8 +146,9 @@ class FluidStepper:
             advice = (f"; the fixed time.fixed_dt = {fixed:g} s breaks the Courant limit: lower "
                       f"it or set it to 0 for adaptive steps" if fixed > 0 else "")
             raise RunFailure(f"step {step}: Courant number {courant:.3g} > 1 (max fluid speed "
-                             f"{max(speed, escaped_speed):.4g} m/s, dt {state.dt:.3g} s): particles jump more than a "
-                             f"spacing per step; the run is unstable{advice}")
+                             f"{max(speed, escaped_speed):.4g} m/s, dt {state.dt:.3g} s): "
+                             f"particles jump more than a spacing per step: the step was too "
+                             f"long, or the run went unstable{advice}")
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),
