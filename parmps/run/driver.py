@@ -103,8 +103,10 @@ def take_step(comm, state, stepper, dt, retries):
     if retries == 0:
         _advance_and_check(state, stepper, dt)
         return 0
-    start = (state.time, state.step, state.dt, state.particles.owned_copy(),
-             copy.deepcopy(stepper.checkpoint_state()))
+    # The start of the step, as a checkpoint keeps it (the particles: owned, no ghosts).
+    run_at_start = state.checkpoint_state()
+    particles_at_start = state.particles.owned_copy()
+    stepper_at_start = copy.deepcopy(stepper.checkpoint_state())
     for attempt in range(retries + 1):
         try:
             _advance_and_check(state, stepper, dt)
@@ -115,10 +117,11 @@ def take_step(comm, state, stepper, dt, retries):
                                  f"down to dt = {dt:.3g} s)") from None
             if comm.rank == 0:
                 log.warning("redoing step %d with dt = %.3g s, half its dt; it failed: %s",
-                            start[1] + 1, dt / 2, failure)
-            state.time, state.step, state.dt = start[:3]
-            state.particles = start[3].owned_copy()
-            stepper.restore_state(copy.deepcopy(start[4]))
+                            run_at_start["step"] + 1, dt / 2, failure)
+            state.restore_state(run_at_start)
+            # Copies again: the next attempt changes them in place.
+            state.particles = particles_at_start.owned_copy()
+            stepper.restore_state(copy.deepcopy(stepper_at_start))
             dt /= 2
 
 
