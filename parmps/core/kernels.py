@@ -98,6 +98,43 @@ def number_density(indptr, cols, position, radius, n_rows):
     return _number_density(indptr, cols, position, radius, n_rows, 3)
 
 
+
+@numba.njit(cache=True, inline="always")
+def wendland(q):
+    """Wendland's C2 function (1 - q)^4 (1 + 4q) of q = r / support, 0 from q = 1 on:
+    smooth and finite at r = 0 (the density measure of the sources, the probes' weight)."""
+    if q >= 1.0:
+        return 0.0
+    a = 1.0 - q
+    return a * a * a * a * (1.0 + 4.0 * q)
+
+
+@numba.njit(cache=True, inline="always")
+def _smooth_weight_of_r2(r2, support):
+    if r2 >= support * support:
+        return 0.0
+    return wendland(np.sqrt(r2) / support)
+
+
+@numba.njit(cache=True, inline="always")
+def _smooth_density(indptr, cols, position, support, n_rows, d):
+    density = np.ones(n_rows)  # each particle's own weight, W(0) = 1
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            total += _smooth_weight_of_r2(pair_distance2(position, i, cols[p], d), support)
+        density[i] += total
+    return density
+
+
+@numba.njit(cache=True)
+def smooth_density(indptr, cols, position, support, n_rows):
+    """sum_j W(r_ij) over j and i itself, W Wendland's C2 function of radius ``support``."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _smooth_density(indptr, cols, position, support, n_rows, 2)
+    return _smooth_density(indptr, cols, position, support, n_rows, 3)
+
 # --- pairs within a smaller radius ------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

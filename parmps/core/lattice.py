@@ -43,6 +43,15 @@ def reference_values(spacing, radius, dimension):
     return n0, lambda0
 
 
+def smooth_reference(spacing, support, dimension):
+    """The smooth density sum_j W(r_j), self included, of a particle inside the full lattice.
+
+    W is Wendland's C2 function of radius ``support`` (kernels.smooth_density).
+    """
+    q = _lattice_distances(spacing, support, dimension) / support
+    return float(np.where(q < 1.0, (1.0 - q) ** 4 * (1.0 + 4.0 * q), 0.0).sum())
+
+
 def neighbour_count_reference(spacing, radius, dimension):
     """How many lattice neighbours lie within ``radius`` of an interior particle in d dimensions."""
     distance = _lattice_distances(spacing, radius, dimension)

@@ -19,18 +19,12 @@ import numba
 import numpy as np
 from mpi4py import MPI
 
+from parmps.core.kernels import wendland
+from parmps.core.lattice import smooth_reference
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 
 # Columns of the per-sample sums.
 FLUID_WEIGHT, FLUID_PRESSURE, OCCUPIED_WEIGHT = 0, 1, 2
-
-
-@numba.njit(cache=True, inline="always")
-def _wendland(q):
-    if q >= 1.0:
-        return 0.0
-    a = 1.0 - q
-    return a * a * a * a * (1.0 + 4.0 * q)
 
 
 @numba.njit(cache=True)
@@ -59,7 +53,7 @@ def _accumulate(position, kind, pressure, n_owned, origin, direction, step, coun
             for s in range(first, last + 1):
                 sx = dx - s * step[g] * direction[g, 0]
                 sy = dy - s * step[g] * direction[g, 1]
-                w = _wendland(math.sqrt(sx * sx + sy * sy) / radius[g])
+                w = wendland(math.sqrt(sx * sx + sy * sy) / radius[g])
                 if w > 0.0:
                     row = start[g] + s
                     sums[row, OCCUPIED_WEIGHT] += w
@@ -70,11 +64,7 @@ def _accumulate(position, kind, pressure, n_owned, origin, direction, step, coun
 
 def lattice_sum(radius_in_spacings):
     """The kernel's sum over a full square lattice of unit spacing, a node on the point."""
-    reach = int(math.ceil(radius_in_spacings))
-    offsets = np.arange(-reach, reach + 1, dtype=np.float64)
-    r = np.hypot(offsets[:, None], offsets[None, :]) / radius_in_spacings
-    q = np.minimum(r, 1.0)
-    return float(np.sum((1.0 - q) ** 4 * (1.0 + 4.0 * q)))
+    return smooth_reference(1.0, radius_in_spacings, 2)
 
 
 class SampleRows:
