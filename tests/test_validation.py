@@ -4,6 +4,7 @@ that exists and a reference that names its source; a malformed file is refused i
 import os
 import shutil
 
+import numpy as np
 import pytest
 
 from parmps import validation
@@ -86,3 +87,15 @@ def test_bad_validation_file_is_refused_in_one_line(tmp_path, name):
     with pytest.raises(CaseError) as error:
         validation.load("bad", directory=str(tmp_path / "validation"))
     assert message in str(error.value) and "\n" not in str(error.value)
+
+
+def test_running_mean_keeps_a_constant_averages_a_period_away_and_counts_nan_as_zero():
+    from parmps.tools import analysis
+    t = np.linspace(0.0, 1.0, 1001)
+    np.testing.assert_allclose(analysis.running_mean(t, np.full_like(t, 3.0), 0.1), 3.0)
+    wave = analysis.running_mean(t, np.sin(2 * np.pi * t / 0.1), 0.1)
+    assert np.abs(wave[60:-60]).max() < 1e-3
+    dry = np.where(t < 0.5, np.nan, 1.0)
+    mean = analysis.running_mean(t, dry, 0.2)
+    assert mean[300] == 0.0 and mean[700] == pytest.approx(1.0)
+    assert mean[500] == pytest.approx(0.5, abs=0.01)

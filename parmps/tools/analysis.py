@@ -428,6 +428,20 @@ def window_mean(t, value, start, end):
     return float(np.sum(0.5 * (value[1:] + value[:-1]) * np.diff(t)) / (t[-1] - t[0]))
 
 
+def running_mean(t, value, width):
+    """The centred time average of a sampled series over a window ``width`` long, at each
+    sample (trapezoids; a NaN sample counts as 0, as a dry wall carries no load). Near
+    the ends the window is cut to the series."""
+    t = np.asarray(t, float)
+    value = np.nan_to_num(np.asarray(value, float), nan=0.0)
+    integral = np.concatenate([[0.0], np.cumsum(0.5 * (value[1:] + value[:-1]) * np.diff(t))])
+    start = np.maximum(t - 0.5 * width, t[0])
+    end = np.minimum(t + 0.5 * width, t[-1])
+    span = end - start
+    inside = np.interp(end, t, integral) - np.interp(start, t, integral)
+    return np.where(span > 0, inside / np.where(span > 0, span, 1.0), value)
+
+
 def first_crossing(t, value, threshold):
     """The first time ``value`` exceeds ``threshold``; NaN if it never does."""
     above = np.flatnonzero(np.nan_to_num(value, nan=-np.inf) > threshold)
