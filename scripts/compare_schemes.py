@@ -46,6 +46,8 @@ SCHEMES = {
                    'mps.gradient="corrected"'],
     "mixed (γ 0.1) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
                            'mps.gradient="corrected"'],
+    "mixed (γ 0.1, smooth n) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
+                                     'mps.mixed.kernel="smooth"', 'mps.gradient="corrected"'],
     "HS": ['mps.source="density_rate"', 'mps.gradient="minimum"'],
     "HS + HL": ['mps.source="density_rate"', 'mps.laplacian="higher_order"',
                 'mps.gradient="minimum"'],
