@@ -411,6 +411,15 @@ def _step(position, velocity, position_star, velocity_star, constants, dt=DT):
                         unknown_index=inside, near_indptr=near_indptr, near_cols=near_cols)
 
 
+def _moving_step(constants, velocity_seed, position_seed):
+    """A jittered lattice moving with random velocities, one step of DT ahead predicted."""
+    position = lattice(JITTER, seed=position_seed)
+    velocity = np.random.default_rng(velocity_seed).normal(0, 0.05, position.shape)
+    position_star = position + DT * velocity
+    return (position, velocity, position_star,
+            _step(position, velocity, position_star, velocity, constants))
+
+
 def test_lattice_normalised_hs_is_the_divergence_source_for_a_linear_field():
     """u = a r on the lattice: the "lattice" HS source is -rho div u / dt = -rho 2a/dt
     exactly (the paper's is (n0 + N)/(d n0) = 1.67 times that at 2.3 l0)."""
@@ -431,11 +440,7 @@ def test_lattice_normalised_hs_is_the_divergence_source_for_a_linear_field():
 def test_compensated_rate_adds_ecs_at_the_start_of_the_step():
     from parmps.fluid.schemes.rate import CompensatedRateSource, DensityRateSource
     constants = _constants()
-    rng = np.random.default_rng(3)
-    position = lattice(JITTER, seed=2)
-    velocity = rng.normal(0, 0.05, position.shape)
-    position_star = position + DT * velocity
-    step = _step(position, velocity, position_star, velocity, constants)
+    position, velocity, _, step = _moving_step(constants, 3, 2)
     settings = {"normalisation": "paper"}
     got = CompensatedRateSource(settings, constants).rhs(step)
     index = step.unknown_index
@@ -556,11 +561,7 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
     from parmps.core.lattice import smooth_reference
     from parmps.fluid.schemes import SOURCES, scheme_class
     constants = _constants()
-    rng = np.random.default_rng(7)
-    position = lattice(JITTER, seed=4)
-    velocity = rng.normal(0, 0.05, position.shape)
-    position_star = position + DT * velocity
-    step = _step(position, velocity, position_star, velocity, constants)
+    position, _, position_star, step = _moving_step(constants, 7, 4)
     cls = scheme_class(SOURCES, name)
     gamma = 0.2
     smooth = cls({"relaxation": gamma, "kernel": "smooth"}, constants).rhs(step)
@@ -571,10 +572,11 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
     reference = smooth_reference(SPACING, constants.re_number_density, 2)
     term = gamma * DENSITY / DT ** 2 * (measure - reference) / reference
     if name == "mixed":
-        divergence_part = mps - cls({"relaxation": gamma, "kernel": "mps"}, constants) \
-            .density_error(step, position, kernels.number_density(
-                step.indptr, step.cols, position, constants.re_number_density,
-                len(position))[0]) * gamma * DENSITY / DT ** 2
+        density_k, _ = kernels.number_density(step.indptr, step.cols, position,
+                                              constants.re_number_density, len(position))
+        n0 = constants.n0
+        divergence_part = mps - gamma * DENSITY / DT ** 2 * \
+            (density_k[step.unknown_index] - n0) / n0
         term = term + divergence_part
     np.testing.assert_allclose(smooth, term, rtol=1e-9, atol=1e-6 * np.abs(term).max())
     assert np.abs(smooth - mps).max() > 1e-3 * np.abs(mps).max()

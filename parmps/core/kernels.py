@@ -98,7 +98,6 @@ def number_density(indptr, cols, position, radius, n_rows):
     return _number_density(indptr, cols, position, radius, n_rows, 3)
 
 
-
 @numba.njit(cache=True, inline="always")
 def wendland(q):
     """Wendland's C2 function (1 - q)^4 (1 + 4q) of q = r / support, 0 from q = 1 on:
@@ -134,6 +133,7 @@ def smooth_density(indptr, cols, position, support, n_rows):
     if position.shape[1] == 2:
         return _smooth_density(indptr, cols, position, support, n_rows, 2)
     return _smooth_density(indptr, cols, position, support, n_rows, 3)
+
 
 # --- pairs within a smaller radius ------------------------------------------------------------
 

@@ -7,6 +7,7 @@ lattice of spacing l0, full on every side.
 
 import numpy as np
 
+from parmps.core.kernels import wendland
 from parmps.core.operators import weight
 
 
@@ -49,7 +50,7 @@ def smooth_reference(spacing, support, dimension):
     W is Wendland's C2 function of radius ``support`` (kernels.smooth_density).
     """
     q = _lattice_distances(spacing, support, dimension) / support
-    return float(np.where(q < 1.0, (1.0 - q) ** 4 * (1.0 + 4.0 * q), 0.0).sum())
+    return float(np.sum([wendland(value) for value in q]))
 
 
 def neighbour_count_reference(spacing, radius, dimension):

@@ -42,21 +42,22 @@ class RelaxedSource:
                                                     constants.re_number_density,
                                                     constants.dimension)
 
-    def density_error(self, step, position, number_density):
-        """(measure - its lattice value) / lattice value of the unknown rows, the particles at
-        ``position`` (owned, then ghosts) whose MPS number density is ``number_density``."""
+    def density_error(self, step, predicted):
+        """(measure - its lattice value) / lattice value of the unknown rows, at the
+        predicted positions (``predicted``) or at the start of the step."""
         c = self.constants
         index = step.unknown_index
+        if predicted:
+            # The sub-list within the number density's radius was cut at the prediction.
+            position, indptr, cols = step.position_star, step.near_indptr, step.near_cols
+        else:
+            position, indptr, cols = step.position, step.indptr, step.cols
         if self.kernel == "smooth":
-            # The step's pairs within the number density's radius were cut at the
-            # predicted positions; elsewhere (the start of the step) the whole list.
-            if position is step.position_star:
-                indptr, cols = step.near_indptr, step.near_cols
-            else:
-                indptr, cols = step.indptr, step.cols
             measure = kernels.smooth_density(indptr, cols, position, c.re_number_density,
                                              step.n_owned)
             return (measure[index] - self.smooth0) / self.smooth0
+        number_density = (step.number_density if predicted
+                          else step.number_density_at(position, c.re_number_density))
         return (number_density[index] - c.n0) / c.n0
 
 
@@ -67,5 +68,5 @@ class DensitySource(RelaxedSource):
 
     def rhs(self, step):
         c = self.constants
-        error = self.density_error(step, step.position_star, step.number_density)
+        error = self.density_error(step, predicted=True)
         return (c.density / step.dt ** 2) * self.relaxation * error

@@ -23,11 +23,9 @@ class MixedSource(RelaxedSource):
     def rhs(self, step):
         c = self.constants
         index = step.unknown_index
-        current_density = (step.number_density_at(step.position, c.re_number_density)
-                           if self.kernel == "mps" else None)
         divergence = (c.dimension / c.n0) * kernels.divergence_sum(
             step.near_indptr, step.near_cols, step.position_star, step.velocity_star,
             c.re_number_density, step.n_owned)
         return (-(c.density / step.dt) * divergence[index]
                 + self.relaxation * (c.density / step.dt ** 2)
-                * self.density_error(step, step.position, current_density))
+                * self.density_error(step, predicted=False))
