@@ -31,12 +31,20 @@ def kernel_key(default):
 
 class RelaxedSource:
     """A source with a pull back to the lattice density of relaxation gamma,
-    ``[mps.<name>] relaxation`` and ``kernel`` (each subclass's KEYS give its defaults)."""
+    ``[mps.<name>] relaxation`` (each subclass's KEYS give its default)."""
 
     def __init__(self, settings, constants):
         self.relaxation = settings["relaxation"]
         self.constants = constants
-        self.kernel = settings.get("kernel", "mps")
+
+
+class MeasuredSource(RelaxedSource):
+    """A relaxed source whose density error is measured as ``[mps.<name>] kernel`` says
+    (each subclass's KEYS give its default, with :func:`kernel_key`)."""
+
+    def __init__(self, settings, constants):
+        super().__init__(settings, constants)
+        self.kernel = settings["kernel"]
         if self.kernel == "smooth":
             self.smooth0 = lattice.smooth_reference(constants.spacing,
                                                     constants.re_number_density,
@@ -61,7 +69,7 @@ class RelaxedSource:
         return (number_density[index] - c.n0) / c.n0
 
 
-class DensitySource(RelaxedSource):
+class DensitySource(MeasuredSource):
     KEYS = {"relaxation": Key("float", 0.2, gt=0.0, le=1.0,
                               doc="gamma: fraction of the density deviation corrected per step"),
             "kernel": kernel_key("smooth")}

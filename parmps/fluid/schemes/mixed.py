@@ -8,10 +8,10 @@ far less pressure noise than the density source alone.
 
 from parmps.config import Key
 from parmps.core import kernels
-from parmps.fluid.schemes.density import RelaxedSource, kernel_key
+from parmps.fluid.schemes.density import MeasuredSource, kernel_key
 
 
-class MixedSource(RelaxedSource):
+class MixedSource(MeasuredSource):
     # 0.1 measured quietest in the still tank (bottom-probe noise over 0.5-1 s at
     # l0 = 1 cm with the corrected gradient: 3.4 % of rho g H at 0.03, 1.4 % at 0.1,
     # 2.7 % at 0.2): below it the pressure alternates from step to step.
