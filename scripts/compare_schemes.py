@@ -32,35 +32,50 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-# label -> case overrides, each complete against the defaults (which are "MPS + GC") and
-# against the Lobovsky case's own choice (mixed (γ 0.1) + GC). "MPS" is the original scheme; Khayyer & Gotoh's HS is
+# label -> case overrides, each complete against the defaults and against the Lobovsky case's
+# own choice (mixed (γ 0.1) + GC). "MPS" is the original scheme; Khayyer & Gotoh's HS is
 # the density_rate source, ECS the compensated_rate one, HL the higher_order
 # Laplacian, GC the corrected gradient; KK Kondo & Koshizuka's second difference.
+# The free-surface condition: P = 0 on the free-surface particles, left uncorrected (every
+# scheme before the extrapolated condition), or P = 0 half a spacing beyond them, with the
+# corrected gradient applied to them (the default since).
+DIRICHLET = ['mps.free_surface="dirichlet"']
+EXTRAPOLATED = ['mps.free_surface="extrapolated"']
 SCHEMES = {
-    "MPS": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="minimum"'],
-    "MPS + GC": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="corrected"'],
+    "MPS": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="minimum"',
+            *DIRICHLET],
+    "MPS + GC": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="corrected"',
+                 *DIRICHLET],
     "MPS (smooth n) + GC": ['mps.source="density"', 'mps.density.kernel="smooth"',
-                            'mps.gradient="corrected"'],
-    "mixed": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", 'mps.gradient="minimum"'],
+                            'mps.gradient="corrected"', *DIRICHLET],
+    "mixed": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", 'mps.gradient="minimum"',
+              *DIRICHLET],
     "mixed + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.01",
-                   'mps.gradient="corrected"'],
+                   'mps.gradient="corrected"', *DIRICHLET],
     "mixed (γ 0.1) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                           'mps.gradient="corrected"'],
+                           'mps.gradient="corrected"', *DIRICHLET],
     "mixed (γ 0.1, smooth n) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                                     'mps.mixed.kernel="smooth"', 'mps.gradient="corrected"'],
-    "HS": ['mps.source="density_rate"', 'mps.gradient="minimum"'],
+                                     'mps.mixed.kernel="smooth"', 'mps.gradient="corrected"',
+                                     *DIRICHLET],
+    "HS": ['mps.source="density_rate"', 'mps.gradient="minimum"', *DIRICHLET],
     "HS + HL": ['mps.source="density_rate"', 'mps.laplacian="higher_order"',
-                'mps.gradient="minimum"'],
+                'mps.gradient="minimum"', *DIRICHLET],
     "HS (lattice) + GC": ['mps.source="density_rate"',
                           'mps.density_rate.normalisation="lattice"',
-                          'mps.gradient="corrected"'],
+                          'mps.gradient="corrected"', *DIRICHLET],
     "HS + ECS + HL + GC": ['mps.source="compensated_rate"', 'mps.laplacian="higher_order"',
-                           'mps.gradient="corrected"'],
+                           'mps.gradient="corrected"', *DIRICHLET],
     "HS + ECS (lattice) + GC": ['mps.source="compensated_rate"',
                                 'mps.compensated_rate.normalisation="lattice"',
-                                'mps.gradient="corrected"'],
-    "KK": ['mps.source="density_acceleration"', 'mps.gradient="minimum"'],
-    "KK + GC": ['mps.source="density_acceleration"', 'mps.gradient="corrected"'],
+                                'mps.gradient="corrected"', *DIRICHLET],
+    "KK": ['mps.source="density_acceleration"', 'mps.gradient="minimum"', *DIRICHLET],
+    "KK + GC": ['mps.source="density_acceleration"', 'mps.gradient="corrected"', *DIRICHLET],
+    "MPS (smooth n) + GC, extrapolated surface": ['mps.source="density"',
+                                                  'mps.density.kernel="smooth"',
+                                                  'mps.gradient="corrected"', *EXTRAPOLATED],
+    "mixed (γ 0.1) + GC, extrapolated surface": ['mps.source="mixed"',
+                                                 "mps.mixed.relaxation=0.1",
+                                                 'mps.gradient="corrected"', *EXTRAPOLATED],
 }
 PARTS = ("tank1cm", "tank5mm", "lobovsky", "box", "membrane", "cost")
 

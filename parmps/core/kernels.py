@@ -277,19 +277,17 @@ def pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radius
 # --- gradient correction ----------------------------------------------------------------------
 
 @numba.njit(cache=True)
-def _smallest_eigenvalue(a, work):
-    """Smallest eigenvalue of the symmetric matrix ``a`` (small, d×d) by cyclic Jacobi rotations.
+def _jacobi_diagonalise(work, vectors, accumulate):
+    """Diagonalise the small symmetric ``work`` (d×d) in place by cyclic Jacobi rotations;
+    with ``accumulate``, multiply each rotation into ``vectors`` (d×d), whose columns then
+    hold the eigenvectors of the diagonal's eigenvalues if it started as the identity.
 
-    ``work`` is d×d scratch. Each rotation zeroes one off-diagonal pair; the
-    sweeps converge quadratically and leave the eigenvalues on the diagonal to
-    round-off of the largest, also where eigenvalues coincide (a closed form
-    through arccos loses sqrt(eps) there, and A_i near the identity is the
-    common case).
+    Each rotation zeroes one off-diagonal pair; the sweeps converge quadratically and
+    leave the eigenvalues on the diagonal to round-off of the largest, also where
+    eigenvalues coincide (a closed form through arccos loses sqrt(eps) there, and A_i
+    near the identity is the common case).
     """
-    d = a.shape[0]
-    for k in range(d):
-        for m in range(d):
-            work[k, m] = a[k, m]
+    d = work.shape[0]
     for _ in range(50):
         off = 0.0
         scale = 0.0
@@ -323,6 +321,23 @@ def _smallest_eigenvalue(a, work):
                 work[q, q] += t * apq
                 work[p, q] = 0.0
                 work[q, p] = 0.0
+                if accumulate:
+                    for k in range(d):
+                        vkp = vectors[k, p]
+                        vkq = vectors[k, q]
+                        vectors[k, p] = c * vkp - s * vkq
+                        vectors[k, q] = s * vkp + c * vkq
+
+
+@numba.njit(cache=True)
+def _smallest_eigenvalue(a, work):
+    """Smallest eigenvalue of the symmetric matrix ``a`` (small, d×d), by
+    :func:`_jacobi_diagonalise`; ``work`` is d×d scratch."""
+    d = a.shape[0]
+    for k in range(d):
+        for m in range(d):
+            work[k, m] = a[k, m]
+    _jacobi_diagonalise(work, work, False)
     smallest = work[0, 0]
     for k in range(1, d):
         smallest = min(smallest, work[k, k])
@@ -413,6 +428,68 @@ def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradie
                              gradient, min_eigenvalue, rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _correct_normal_component(indptr, cols, position, has_pressure, radius, scale, gradient,
+                              normal, min_eigenvalue, rows, d):
+    corrected = 0
+    for i in range(gradient.shape[0]):
+        if not rows[i]:
+            continue
+        length = 0.0
+        for k in range(d):
+            length += normal[i, k] * normal[i, k]
+        if length <= 0.0:
+            continue
+        length = np.sqrt(length)
+        # n . A_i n, the moment matrix along the normal.
+        along = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not has_pressure[j]:
+                continue
+            r2 = pair_distance2(position, i, j, d)
+            w = _weight_of_r2(r2, radius)
+            if w > 0.0:
+                rn = 0.0
+                for k in range(d):
+                    rn += pair_component(position, i, j, k) * normal[i, k]
+                along += rn * rn * w / (r2 * length * length)
+        along *= scale
+        if along < min_eigenvalue or along >= 1.0:
+            continue
+        component = 0.0
+        for k in range(d):
+            component += gradient[i, k] * normal[i, k]
+        factor = (1.0 / along - 1.0) * component / (length * length)
+        for k in range(d):
+            gradient[i, k] += factor * normal[i, k]
+        corrected += 1
+    return corrected
+
+
+@numba.njit(cache=True)
+def correct_normal_component(indptr, cols, position, has_pressure, radius, scale, gradient,
+                             normal, min_eigenvalue, rows):
+    """Correct the gradient of the ``rows`` (a mask) along their ``normal`` only, in place.
+
+    ``gradient`` is as for :func:`correct_gradient`. With ``a_n = n . A_i n`` (A_i
+    its moment matrix, n the unit normal), the component along n is divided by
+    a_n and the rest is left alone: ``g + (1/a_n - 1)(g . n) n``. On a flat free
+    surface A_i is diagonal in the surface's frame, with a_n = 0.5 and 1 along
+    it, so this is A_i^-1 g exactly; on a splash or a jet's tip, where A_i has
+    no full direction and its inverse would turn a strong gradient along the
+    flow towards a wall, it only scales the part towards the air. Rows with a_n
+    below ``min_eigenvalue`` or at least 1, or without a normal, are left as
+    they are. Returns how many rows were corrected.
+    """
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _correct_normal_component(indptr, cols, position, has_pressure, radius, scale,
+                                         gradient, normal, min_eigenvalue, rows, 2)
+    return _correct_normal_component(indptr, cols, position, has_pressure, radius, scale,
+                                     gradient, normal, min_eigenvalue, rows, 3)
+
+
 # --- collisions -------------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")
@@ -457,6 +534,10 @@ def collision_change(indptr, cols, position, velocity, moving, distance_limit, r
                                  restitution, n_rows, 2)
     return _collision_change(indptr, cols, position, velocity, moving, distance_limit,
                              restitution, n_rows, 3)
+
+
+# A row of the pressure matrix that is an unknown free-surface particle (is_unknown's value).
+SURFACE_ROW = 2
 
 
 # --- pressure matrix --------------------------------------------------------------------------
@@ -564,6 +645,248 @@ def variable_density_poisson_rows(indptr, cols, position, radius, row_number, is
     return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
                          coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
                          mobility, 3)
+
+
+@numba.njit(cache=True, inline="always")
+def _is_set(normal, i, d):
+    for k in range(d):
+        if normal[i, k] != 0.0:
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _surface_normals(indptr, cols, position, is_surface, radius, n_rows, d):
+    normal = np.zeros((n_rows, d))
+    for i in range(n_rows):
+        # Most rows are deep in the water: find that out from the few surface particles
+        # before summing over every pair.
+        near_surface = is_surface[i]
+        if not near_surface:
+            for p in range(indptr[i], indptr[i + 1]):
+                j = cols[p]
+                if is_surface[j] and _weight_of_r2(pair_distance2(position, i, j, d),
+                                                   radius) > 0.0:
+                    near_surface = True
+                    break
+        if not near_surface:
+            continue
+        size = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            r2 = pair_distance2(position, i, j, d)
+            w = _weight_of_r2(r2, radius)
+            if w <= 0.0:
+                continue
+            size += w * np.sqrt(r2)
+            for k in range(d):
+                normal[i, k] -= w * pair_component(position, i, j, k)
+        length2 = 0.0
+        for k in range(d):
+            length2 += normal[i, k] * normal[i, k]
+        # A full neighbourhood's sum is rounding error, not a direction.
+        if length2 <= (1e-9 * size) ** 2:
+            for k in range(d):
+                normal[i, k] = 0.0
+    return normal
+
+
+@numba.njit(cache=True)
+def surface_normals(indptr, cols, position, is_surface, radius, n_rows):
+    """``-sum_j w_ij r_ij`` over every neighbour (dummies too) of the rows with a free-surface
+    particle (``is_surface``, every local particle) in their support or one themselves,
+    0 elsewhere: it points away from the neighbours present, to where the missing ones
+    are (not normalised): the side a normal of :func:`surface_fitted_normals` points to."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _surface_normals(indptr, cols, position, is_surface, radius, n_rows, 2)
+    return _surface_normals(indptr, cols, position, is_surface, radius, n_rows, 3)
+
+
+@numba.njit(cache=True)
+def _smallest_eigenvector(a, work, vectors, out):
+    """The unit eigenvector of the smallest eigenvalue of the small symmetric ``a``, into
+    ``out``, by :func:`_jacobi_diagonalise` (``work`` and ``vectors``: d×d scratch)."""
+    d = a.shape[0]
+    for k in range(d):
+        for m in range(d):
+            work[k, m] = a[k, m]
+            vectors[k, m] = 1.0 if k == m else 0.0
+    _jacobi_diagonalise(work, vectors, True)
+    smallest = 0
+    for k in range(1, d):
+        if work[k, k] < work[smallest, smallest]:
+            smallest = k
+    for k in range(d):
+        out[k] = vectors[k, smallest]
+
+
+@numba.njit(cache=True, inline="always")
+def _surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_rows, d):
+    normal = np.zeros((n_rows, d))
+    centre = np.empty(d)
+    spread = np.empty((d, d))
+    work = np.empty((d, d))
+    vectors = np.empty((d, d))
+    direction = np.empty(d)
+    for i in range(n_rows):
+        length = 0.0
+        for k in range(d):
+            length += raw[i, k] * raw[i, k]
+        if length <= 0.0:
+            continue
+        length = np.sqrt(length)
+        # The weighted spread of the free-surface particles about their centre: the
+        # surface's normal is its direction of least spread. Positions relative to i.
+        total = 0.0
+        count = 0
+        for k in range(d):
+            centre[k] = 0.0
+            for m in range(d):
+                spread[k, m] = 0.0
+        if on_surface[i]:
+            total = 1.0
+            count = 1
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not on_surface[j]:
+                continue
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w <= 0.0:
+                continue
+            total += w
+            count += 1
+            for k in range(d):
+                centre[k] += w * pair_component(position, i, j, k)
+                for m in range(d):
+                    spread[k, m] += w * pair_component(position, i, j, k) * \
+                        pair_component(position, i, j, m)
+        fitted = count >= d + 1
+        if fitted:
+            for k in range(d):
+                centre[k] /= total
+            for k in range(d):
+                for m in range(d):
+                    spread[k, m] = spread[k, m] / total - centre[k] * centre[m]
+            _smallest_eigenvector(spread, work, vectors, direction)
+            along = 0.0
+            for k in range(d):
+                along += direction[k] * raw[i, k]
+            # Outwards: on the side of the missing neighbours.
+            sign = 1.0 if along >= 0.0 else -1.0
+            for k in range(d):
+                normal[i, k] = sign * direction[k]
+        else:
+            for k in range(d):
+                normal[i, k] = raw[i, k] / length
+    return normal
+
+
+@numba.njit(cache=True)
+def surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_rows):
+    """Unit outward normals of the rows near the free surface (where ``raw``, from
+    :func:`surface_normals`, is set; 0 elsewhere): the direction in which the
+    free-surface particles ``on_surface`` (every local particle) within the radius,
+    the row itself included, spread least (weighted by w_ij, the row by 1), turned
+    to the side ``raw`` points to. With fewer than d + 1 such particles, ``raw``
+    itself. The missing neighbours' direction alone would lean away from a wall
+    that rises above the water: there, only the air's side of the wall misses."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _surface_fitted_normals(indptr, cols, position, raw, on_surface, radius,
+                                       n_rows, 2)
+    return _surface_fitted_normals(indptr, cols, position, raw, on_surface, radius,
+                                   n_rows, 3)
+
+
+@numba.njit(cache=True, inline="always")
+def _surface_depth(indptr, cols, position, i, is_surface, radius, normal, half_spacing,
+                   inverse_cube, d):
+    # How far the zero level lies from i along the outward normal: half a spacing
+    # beyond a free-surface particle; below the surface, half a spacing plus the
+    # free-surface neighbours' mean height above i, weighted as the sum weighs them.
+    if is_surface[i]:
+        return half_spacing
+    depth = 0.0
+    weight_sum = 0.0
+    for p in range(indptr[i], indptr[i + 1]):
+        j = cols[p]
+        if not is_surface[j]:
+            continue
+        r2 = pair_distance2(position, i, j, d)
+        w = _laplacian_weight(r2, radius, inverse_cube)
+        if w <= 0.0:
+            continue
+        height = 0.0
+        for k in range(d):
+            height += pair_component(position, i, j, k) * normal[k]
+        depth += w * max(height, 0.0)
+        weight_sum += w
+    if weight_sum <= 0.0:
+        return -1.0
+    return half_spacing + depth / weight_sum
+
+
+@numba.njit(cache=True, inline="always")
+def _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface, normal,
+                            inverse_cube, half_spacing, undirected, n_rows, d):
+    extra = np.zeros(n_rows)
+    for i in range(n_rows):
+        if not is_unknown[i]:
+            continue
+        if is_surface[i]:
+            extra[i] = undirected
+        if not _is_set(normal, i, d):
+            continue
+        # The missing neighbours' first moment along the normal: minus the present ones'.
+        moment = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            w = _laplacian_weight(pair_distance2(position, i, j, d), radius, inverse_cube)
+            if w <= 0.0:
+                continue
+            for k in range(d):
+                moment -= w * pair_component(position, i, j, k) * normal[i, k]
+        depth = _surface_depth(indptr, cols, position, i, is_surface, radius, normal[i],
+                               half_spacing, inverse_cube, d)
+        if depth > 0.0 and moment > 0.0:
+            extra[i] = moment / depth
+    return extra
+
+
+@numba.njit(cache=True)
+def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface, normal,
+                           inverse_cube, half_spacing, undirected, n_rows):
+    """Per owned row, the diagonal the missing neighbours add when the pressure is zero
+    half a spacing beyond the free-surface particles (before the Laplacian's coefficient).
+
+    ``is_unknown`` and ``is_surface`` mark every local particle: a row solved for,
+    a free-surface particle. An unknown row with a free-surface particle in its
+    support (or one itself) misses the neighbours beyond the surface. Their first
+    moment is minus that of the neighbours present, ``-V_i = -sum_j w_ij r_ij``
+    (every neighbour counts, dummies too: only air is missing). A missing neighbour
+    g takes the value of the linear field that is P_i at i and 0 on the surface
+    ``delta_i`` away along ``-V_i/|V_i|``: ``P_g - P_i = -P_i (r_ig . n)/delta_i``,
+    so the missing ones add ``-P_i |V_i| / delta_i`` to the row's sum: the diagonal
+    only, and the matrix stays symmetric (Gibou et al. 2002's ghost-fluid Dirichlet
+    condition, with the kernel's moment in place of the grid's). ``delta_i`` is
+    half a spacing for a surface particle; below the surface, half a spacing plus
+    the surface particles' mean height above i along the normal. A linear field
+    that is zero on that surface satisfies every such row exactly.
+
+    A free-surface row whose missing neighbours have no direction (it has no
+    neighbour, or neighbours all round, as in a sheet one particle thick) gets
+    ``undirected`` instead: without it the row would be singular when the
+    compressibility is zero. Its size, an interior row's diagonal, holds such a
+    particle near zero as the plain Dirichlet condition would.
+    """
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
+                                       normal, inverse_cube, half_spacing, undirected, n_rows,
+                                       2)
+    return _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
+                                   normal, inverse_cube, half_spacing, undirected, n_rows, 3)
 
 
 @numba.njit(cache=True)

@@ -15,10 +15,10 @@ import numpy as np
 
 from parmps.core import kernels
 from parmps.core.neighbours import pair_list
-from parmps.core.particles import DUMMY, FLUID, INFLOW
+from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
-from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, scheme_class
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, scheme_class
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +97,8 @@ class FluidSolver:
                                                                     constants)
         self.gradient = scheme_class(GRADIENTS, mps["gradient"])(mps[mps["gradient"]],
                                                                  constants)
+        self.free_surface = scheme_class(SURFACES, mps["free_surface"])(
+            mps[mps["free_surface"]], constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
@@ -177,16 +179,18 @@ class FluidSolver:
         if self.neighbour_threshold > 0.0:
             surface |= neighbour_count < self.neighbour_threshold * c.neighbour_count0
         has_pressure = kind != DUMMY
-        unknown = has_pressure[:n] & ~surface
+        unknown, surface_unknown = self.free_surface.unknowns(
+            has_pressure[:n], surface, (kind[:n] == FLUID) | (kind[:n] == WALL))
         if dirichlet is not None:
             # Open boundaries: a closed channel otherwise has no pressure level.
             unknown &= ~dirichlet
+            surface_unknown &= ~dirichlet
         pressure_index = np.flatnonzero(has_pressure[:n])
         first_row = self.comm.exscan(len(pressure_index)) or 0
         row_number = np.full(len(particles), -1, np.int64)
         row_number[pressure_index] = first_row + np.arange(len(pressure_index))
         is_unknown = np.zeros(len(particles), np.int8)
-        is_unknown[:n] = unknown
+        is_unknown[:n] = np.where(surface_unknown, kernels.SURFACE_ROW, unknown)
         timers.start("halo")
         decomposition.refresh([row_number, is_unknown])
 
@@ -194,12 +198,20 @@ class FluidSolver:
         csr_indptr, columns, values = self.laplacian.rows(
             indptr, cols, position_star, row_number, is_unknown,
             c.density * self.compressibility / dt ** 2, mobility)
+        extra_diagonal, surface_gradient = self.free_surface.terms(
+            indptr, cols, position_star, is_unknown, self.moving(kind), self.laplacian, n)
+        if extra_diagonal is not None:
+            if mobility is not None:
+                extra_diagonal *= mobility[:n]
+            # Each row's diagonal is its first entry.
+            values[csr_indptr[:-1]] += extra_diagonal[pressure_index]
         rhs = np.zeros(len(pressure_index))
-        in_rows = unknown[pressure_index]
-        rhs[in_rows] = self.source.rhs(PressureStep(
+        in_rows = (unknown | surface_unknown)[pressure_index]
+        with_source = unknown[pressure_index]
+        rhs[with_source] = self.source.rhs(PressureStep(
             dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
             velocity=velocity, position_star=position_star, velocity_star=velocity_star,
-            number_density=number_density, unknown_index=pressure_index[in_rows],
+            number_density=number_density, unknown_index=pressure_index[with_source],
             near_indptr=near_indptr, near_cols=near_cols))
 
         timers.start("solve")
@@ -218,8 +230,9 @@ class FluidSolver:
 
         timers.start("operators")
         # Only the particles the correction moves need the gradient.
-        pressure_gradient = self.gradient.gradient(near_indptr, near_cols, position_star,
-                                                   pressure, has_pressure, n, moving)
+        pressure_gradient = self.gradient.gradient(
+            near_indptr, near_cols, position_star, pressure, has_pressure, n, moving,
+            surface=surface_gradient)
         correction = pressure_gradient[moving] / c.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction

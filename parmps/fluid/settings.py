@@ -2,7 +2,7 @@
 
 from parmps.config import Key, Section
 from parmps.errors import CaseError
-from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, registered
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, registered
 
 
 def _mps_section():
@@ -21,6 +21,9 @@ def _mps_section():
                          doc="the PPE's Laplacian (settings in [mps.<name>])"),
         "gradient": Key("str", "corrected", choices=tuple(GRADIENTS),
                         doc="the pressure-gradient scheme (settings in [mps.<name>])"),
+        "free_surface": Key("str", "extrapolated", choices=tuple(SURFACES),
+                            doc="where P = 0: \"extrapolated\" half a spacing beyond the "
+                                "free-surface particles, \"dirichlet\" on them"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True),
         "collision": Key("bool", True),

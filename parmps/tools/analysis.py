@@ -163,9 +163,9 @@ def hydrostatic_pressure_error(path, case, settle_time):
     ``height_drift`` reports on its own. Returns a dict:
 
     - ``bottom``: the time-averaged error, mean over the initial bottom fluid row;
-    - ``rms``: RMS over every fluid particle but the initial top row (where the
-      free-surface condition sets P = 0 half a spacing below the surface) of the
-      time-averaged error;
+    - ``rms``: RMS over every fluid particle but the initial top row (the free-surface
+      particles, whose pressure P = 0 on themselves, the original condition, would
+      have set) of the time-averaged error;
     - ``bottom_std``, ``bottom_series``, ``bottom_times``: the bottom row's mean error
       frame by frame and its standard deviation over time (the pressure noise);
     - ``noise``: RMS over particles and frames of the instantaneous error;

@@ -34,14 +34,20 @@ GRADIENTS = {
     "corrected": "parmps.fluid.schemes.gradient:CorrectedGradient",
 }
 
+SURFACES = {
+    "dirichlet": "parmps.fluid.schemes.surface:DirichletSurface",
+    "extrapolated": "parmps.fluid.schemes.surface:ExtrapolatedSurface",
+}
+
 
 def scheme_class(registry, name):
-    """The class registered under ``name`` in ``registry`` (SOURCES, LAPLACIANS or GRADIENTS)."""
+    """The class registered under ``name`` in ``registry`` (SOURCES, LAPLACIANS, GRADIENTS or
+    SURFACES)."""
     module, attribute = registry[name].split(":")
     return getattr(importlib.import_module(module), attribute)
 
 
 def registered():
-    """Every registered scheme as (name, class): sources, Laplacians, gradients."""
+    """Every registered scheme as (name, class): sources, Laplacians, gradients, surfaces."""
     return [(name, scheme_class(registry, name))
-            for registry in (SOURCES, LAPLACIANS, GRADIENTS) for name in registry]
+            for registry in (SOURCES, LAPLACIANS, GRADIENTS, SURFACES) for name in registry]

@@ -8,6 +8,8 @@ by the inverse of the moment matrix ``A_i = d/n0 sum_j r_ij (x) r_ij w / r^2``
 (Khayyer & Gotoh 2011), exact for a linear field on any arrangement.
 """
 
+import numpy as np
+
 from parmps.config import Key
 from parmps.core import kernels
 
@@ -18,9 +20,11 @@ class MinimumPressureGradient:
     def __init__(self, settings, constants):
         self.constants = constants
 
-    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None):
+    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None,
+                 surface=None):
         """(n_rows, d) pressure gradient of the rows [0, n_rows) of the pair list; with
-        ``rows`` (a mask), of those rows only, the others 0."""
+        ``rows`` (a mask), of those rows only, the others 0. ``surface`` is for the
+        corrected gradient; the plain one has nothing to correct."""
         c = self.constants
         return (c.dimension / c.n0) * kernels.pressure_gradient_sum(
             indptr, cols, position, pressure, has_pressure, c.re_number_density, n_rows, rows)
@@ -29,18 +33,32 @@ class MinimumPressureGradient:
 class CorrectedGradient(MinimumPressureGradient):
     KEYS = {"eigenvalue_limit": Key("float", 0.7, gt=0.0, le=1.0,
                                     doc="rows whose moment matrix (the identity on the full "
-                                        "lattice) has an eigenvalue below this keep the plain "
-                                        "gradient: a truncated neighbourhood at a free surface "
-                                        "or in a splash")}
+                                        "lattice, 0.5 on a flat free surface) has an "
+                                        "eigenvalue below this keep the plain gradient: a "
+                                        "splash, a body's face to the air (the free-surface "
+                                        "condition may set its own limit for the fluid's "
+                                        "surface particles)")}
 
     def __init__(self, settings, constants):
         super().__init__(settings, constants)
         self.eigenvalue_limit = settings["eigenvalue_limit"]
 
-    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None):
+    def gradient(self, indptr, cols, position, pressure, has_pressure, n_rows, rows=None,
+                 surface=None):
+        """As the plain gradient, corrected. ``surface``: None, or (rows, normals, limit) from
+        the free-surface condition: those rows are corrected along their normal only
+        (kernels.correct_normal_component) down to that limit, the others as usual."""
         c = self.constants
         gradient = super().gradient(indptr, cols, position, pressure, has_pressure, n_rows,
                                     rows)
+        every = rows
+        if surface is not None:
+            surface_rows, normal, surface_limit = surface
+            every = np.ones(n_rows, bool) if rows is None else rows.copy()
+            every &= ~surface_rows
+            kernels.correct_normal_component(indptr, cols, position, has_pressure,
+                                             c.re_number_density, c.dimension / c.n0, gradient,
+                                             normal, surface_limit, surface_rows)
         kernels.correct_gradient(indptr, cols, position, has_pressure, c.re_number_density,
-                                 c.dimension / c.n0, gradient, self.eigenvalue_limit, rows)
+                                 c.dimension / c.n0, gradient, self.eigenvalue_limit, every)
         return gradient

@@ -1,0 +1,206 @@
+"""The free-surface conditions on a lattice: the extrapolated one is exact for the linear field
+that is zero half a spacing above the top row; the Dirichlet one reads the surface there."""
+
+import numpy as np
+import pytest
+
+from parmps.core import kernels
+from parmps.core.lattice import reference_values
+from parmps.core.neighbours import pair_list
+
+RE, RE_LAPLACIAN = 2.3, 3.1
+WIDTH, DEPTH = 40, 12          # fluid particles across and deep, l0 = 1
+WALL, DUMMY, FLUID = 1, 2, 0
+
+
+@pytest.fixture(scope="module")
+def layer():
+    """A layer of water on a floor (two wall rows, two dummy rows), open to the air above and
+    at both ends; P = H - y with H half a spacing above the top row."""
+    points, kinds = [], []
+    for i in range(WIDTH):
+        for j in range(DEPTH):
+            points.append((i + 0.5, j + 0.5))
+            kinds.append(FLUID)
+    for i in range(-4, WIDTH + 4):
+        for depth in range(4):
+            points.append((i + 0.5, -depth - 0.5))
+            kinds.append(WALL if depth < 2 else DUMMY)
+    position = np.array(points)
+    kind = np.array(kinds)
+    n = len(position)
+    indptr, cols = pair_list(position, RE_LAPLACIAN + 0.01, n_rows=n)
+    n0, _ = reference_values(1.0, RE, 2)
+    number_density, _ = kernels.number_density(indptr, cols, position, RE, n)
+    has_pressure = kind != DUMMY
+    surface = (number_density < 0.97 * n0) & has_pressure
+    pressure = np.where(has_pressure, DEPTH - position[:, 1], 0.0)
+    # Away from the layer's open ends and from the floor: where the lattice is cut by the
+    # surface only.
+    middle = (kind == FLUID) & (np.abs(position[:, 0] - WIDTH / 2) < WIDTH / 2 - 8) & \
+        (position[:, 1] > 4)
+    return dict(position=position, kind=kind, n=n, indptr=indptr, cols=cols, n0=n0,
+                has_pressure=has_pressure, surface=surface, pressure=pressure, middle=middle)
+
+
+def _ghost_diagonal(s, undirected=0.0):
+    raw = kernels.surface_normals(s["indptr"], s["cols"], s["position"], s["surface"],
+                                  RE_LAPLACIAN, s["n"])
+    normal = kernels.surface_fitted_normals(s["indptr"], s["cols"], s["position"], raw,
+                                            s["surface"] & (s["kind"] == FLUID), RE_LAPLACIAN,
+                                            s["n"])
+    return normal, kernels.surface_ghost_diagonal(
+        s["indptr"], s["cols"], s["position"], RE_LAPLACIAN, s["has_pressure"], s["surface"],
+        normal, False, 0.5, undirected, s["n"])
+
+
+def test_the_surface_is_the_top_row_and_its_normals_point_up(layer):
+    s = layer
+    top = s["middle"] & (s["position"][:, 1] > DEPTH - 1)
+    assert np.array_equal(s["surface"] & s["middle"], top)
+    normal, _ = _ghost_diagonal(s)
+    # The rows that miss a neighbour: those within the radius of the row above the top one.
+    near = s["middle"] & (s["position"][:, 1] > DEPTH + 0.5 - RE_LAPLACIAN)
+    np.testing.assert_allclose(normal[near], np.tile([0.0, 1.0], (near.sum(), 1)), atol=1e-12)
+    assert not normal[s["middle"] & ~near].any()
+
+
+def test_the_extrapolated_rows_are_exact_for_the_field_that_is_zero_above_the_top_row(layer):
+    """Sum_j w (P_j - P_i) over the neighbours present, less the ghosts' diagonal times P_i,
+    is the Laplacian of a linear field: zero, row by row, surface rows included."""
+    s = layer
+    _, diagonal = _ghost_diagonal(s)
+    position, pressure = s["position"], s["pressure"]
+    residual, scale = [], []
+    for i in np.flatnonzero(s["middle"]):
+        total = 0.0
+        for j in s["cols"][s["indptr"][i]:s["indptr"][i + 1]]:
+            r = np.hypot(*(position[j] - position[i]))
+            if s["has_pressure"][j] and 0.0 < r < RE_LAPLACIAN:
+                total += (RE_LAPLACIAN / r - 1.0) * (pressure[j] - pressure[i])
+        residual.append(total - diagonal[i] * pressure[i])
+        scale.append(diagonal[i] * pressure[i])
+    residual, scale = np.array(residual), np.array(scale)
+    assert scale.max() > 1.0            # the rows near the surface do have ghosts
+    np.testing.assert_allclose(residual, 0.0, atol=1e-10)
+    # Without the ghosts (the Dirichlet condition's rows beside the surface) the field misses.
+    assert np.abs(scale).max() > 1.0
+
+
+def test_the_corrected_gradient_is_exact_on_the_surface_below_the_limit_and_half_above(layer):
+    s = layer
+    near_indptr, near_cols = kernels.pairs_within(s["indptr"], s["cols"], s["position"], RE,
+                                                  s["n"])
+    rows = s["kind"] == FLUID
+    plain = (2 / s["n0"]) * kernels.pressure_gradient_sum(
+        near_indptr, near_cols, s["position"], s["pressure"], s["has_pressure"], RE, s["n"], rows)
+    top = s["middle"] & (s["position"][:, 1] > DEPTH - 1)
+    deep = s["middle"] & (s["position"][:, 1] < DEPTH - 2)
+    for limit, on_surface in ((0.45, -1.0), (0.7, -0.5)):
+        gradient = plain.copy()
+        kernels.correct_gradient(near_indptr, near_cols, s["position"], s["has_pressure"], RE,
+                                 2 / s["n0"], gradient, limit, rows)
+        np.testing.assert_allclose(gradient[top], np.tile([0.0, on_surface], (top.sum(), 1)),
+                                   atol=1e-3 if limit > 0.5 else 1e-12)
+        np.testing.assert_allclose(gradient[deep], np.tile([0.0, -1.0], (deep.sum(), 1)),
+                                   atol=1e-12)
+
+
+def test_a_surface_row_without_a_direction_gets_the_undirected_diagonal():
+    """One particle alone, and the middle of a one-particle-thick sheet: their missing
+    neighbours have no direction, so the ghosts' term is the given fallback, never 0 (a
+    singular row without compressibility)."""
+    position = np.array([[0.0, 0.0]] + [[10.0 + i, 0.0] for i in range(9)])
+    n = len(position)
+    indptr, cols = pair_list(position, RE_LAPLACIAN + 0.01, n_rows=n)
+    surface = np.ones(n, bool)
+    raw = kernels.surface_normals(indptr, cols, position, surface, RE_LAPLACIAN, n)
+    normal = kernels.surface_fitted_normals(indptr, cols, position, raw, surface, RE_LAPLACIAN, n)
+    diagonal = kernels.surface_ghost_diagonal(indptr, cols, position, RE_LAPLACIAN, surface,
+                                              surface, normal, False, 0.5, 7.0, n)
+    assert diagonal[0] == 7.0 and diagonal[5] == 7.0
+    assert (diagonal > 0.0).all()
+
+
+def test_the_extrapolated_condition_corrects_the_fluids_surface_and_nothing_else(layer):
+    """The corrected gradient keeps its own limit (0.7) for every row but the free-surface fluid
+    particles the extrapolated condition names: those it corrects along their normal down to
+    0.45, exact for the field that is zero above them; a free-surface particle it does not name
+    (a body's node at its face to the air) keeps the plain gradient, half the field's. The
+    Dirichlet condition names none and adds no diagonal."""
+    from types import SimpleNamespace
+
+    from parmps.fluid.schemes.gradient import CorrectedGradient
+    from parmps.fluid.schemes.surface import DirichletSurface, ExtrapolatedSurface
+
+    s = layer
+    laplacian = SimpleNamespace(coefficient=1.0, inverse_cube=False, dirichlet_diagonal=7.0)
+    constants = SimpleNamespace(dimension=2, n0=s["n0"], re_number_density=RE,
+                                re_laplacian=RE_LAPLACIAN, spacing=1.0)
+    near_indptr, near_cols = kernels.pairs_within(s["indptr"], s["cols"], s["position"], RE,
+                                                  s["n"])
+    top = s["middle"] & (s["position"][:, 1] > DEPTH - 1)
+    is_unknown = np.where(s["surface"], kernels.SURFACE_ROW, s["has_pressure"]).astype(np.int8)
+    # Half the top row stands in for a body's face: not the fluid, so not its surface.
+    body_face = top & (s["position"][:, 0] < WIDTH / 2)
+    fluid = (s["kind"] == FLUID) & ~body_face
+    fluid_face = top & ~body_face
+    gradient = CorrectedGradient({"eigenvalue_limit": 0.7}, constants)
+    assert DirichletSurface({}, constants).terms(s["indptr"], s["cols"], s["position"],
+                                                  is_unknown, fluid, laplacian, s["n"]) == \
+        (None, None)
+    diagonal, surface = ExtrapolatedSurface({"eigenvalue_limit": 0.45}, constants).terms(
+        s["indptr"], s["cols"], s["position"], is_unknown, fluid, laplacian, s["n"])
+    assert np.array_equal(surface[0] & s["middle"], fluid_face) and surface[2] == 0.45
+    assert (diagonal[top] > 0.0).all()
+    rows = s["kind"] != DUMMY
+    corrected = gradient.gradient(near_indptr, near_cols, s["position"], s["pressure"],
+                                  s["has_pressure"], s["n"], rows, surface=surface)
+    np.testing.assert_allclose(corrected[fluid_face],
+                               np.tile([0.0, -1.0], (fluid_face.sum(), 1)), atol=1e-12)
+    np.testing.assert_allclose(corrected[body_face],
+                               np.tile([0.0, -0.5], (body_face.sum(), 1)), atol=1e-3)
+    # Without the condition's rows: every row at the gradient's own limit, as before.
+    plain_surface = gradient.gradient(near_indptr, near_cols, s["position"], s["pressure"],
+                                      s["has_pressure"], s["n"], rows)
+    np.testing.assert_allclose(plain_surface[fluid_face],
+                               np.tile([0.0, -0.5], (fluid_face.sum(), 1)), atol=1e-3)
+    deep = s["middle"] & (s["position"][:, 1] < DEPTH - 2)
+    np.testing.assert_array_equal(corrected[deep], plain_surface[deep])
+
+
+def test_the_normal_correction_scales_the_normal_part_and_never_turns_the_rest():
+    """On a jet's tip (few neighbours, behind and below) the full inverse of the moment matrix
+    turns a gradient along the flow; the normal correction changes only its part along the
+    normal, by 1/(n . A n), and leaves the rest as it was. On a flat surface it is the full
+    inverse (the test above)."""
+    rng = np.random.default_rng(3)
+    # A tip: a few particles behind (x < 0) and below (y < 0) of particle 0 at the origin.
+    position = np.vstack([[0.0, 0.0], rng.uniform([-2.2, -2.2], [0.3, 0.2], (9, 2))])
+    n = len(position)
+    indptr, cols = pair_list(position, RE + 0.01, n_rows=n)
+    has_pressure = np.ones(n, bool)
+    n0, _ = reference_values(1.0, RE, 2)
+    pressure = 3.0 * position[:, 0] + 0.2 * position[:, 1] + 10.0
+    rows = np.zeros(n, bool)
+    rows[0] = True
+    plain = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
+                                                     has_pressure, RE, n, rows)
+    normal = np.zeros((n, 2))
+    normal[0] = [0.6, 0.8]
+    along = (2 / n0) * sum((RE / np.hypot(*r) - 1.0) * (r @ normal[0]) ** 2 / (r @ r)
+                           for r in position[1:] - position[0] if 0 < np.hypot(*r) < RE)
+    assert 0.0 < along < 1.0
+    scaled = plain.copy()
+    count = kernels.correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
+                                             scaled, normal, 0.0, rows)
+    assert count == 1
+    tangent = np.array([-0.8, 0.6])
+    np.testing.assert_allclose(scaled[0] @ tangent, plain[0] @ tangent, rtol=1e-12)
+    np.testing.assert_allclose(scaled[0] @ normal[0], plain[0] @ normal[0] / along, rtol=1e-12)
+    np.testing.assert_array_equal(scaled[1:], plain[1:])
+    # Below the limit it is left alone.
+    kept = plain.copy()
+    assert kernels.correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
+                                            kept, normal, along + 1e-9, rows) == 0
+    np.testing.assert_array_equal(kept, plain)
