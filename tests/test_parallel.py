@@ -2,7 +2,8 @@
 
 - The dam break after 50 steps on 2 and 3 ranks matches the one-rank run to 1e-9
   (positions and pressures, matched by global id) with -pressure_ksp_rtol 1e-12.
-- The hydrostatic tank on 2 ranks gives rho g (H - y) within 2 %, like one rank.
+- The hydrostatic tank on 2 ranks reads the weight of the water above within the tolerances
+  of validation/hydrostatic, like one rank.
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
 - A decomposition that cannot work is refused with exit status 2 and one line.
