@@ -57,7 +57,9 @@ def main():
     time_scale = math.sqrt(g / height)
     scale = case["fluid"]["density"] * g * height
     spacing = case["particles"]["spacing"]
-    scheme = f"source {case['mps']['source']}, gradient {case['mps']['gradient']}"
+    scheme = (f"source {case['mps']['source']}, gradient {case['mps']['gradient']}, "
+              # Results written before the key had P = 0 on the surface particles.
+              f"free surface {case['mps'].get('free_surface', 'dirichlet')}")
 
     figure, axes = plt.subplots(2, 2, figsize=(10, 6.5), dpi=110, sharex=True)
     for ax, (name, reference) in zip(axes.flat, check.metric_arguments["references"].items()):
