@@ -10,8 +10,9 @@ its row of the pressure equation is and what the rows beside it lack:
 - ``extrapolated`` (default): zero half a spacing beyond the free-surface
   fluid particles, where the fluid's volume ends. They and the free-surface
   wall particles are unknowns with no source of their own; bodies' nodes and
-  buffers at the surface keep P = 0 on themselves. Every row with a free-surface particle in its
-  support counts its missing neighbours as ghosts carrying the linear field
+  buffers at the surface keep P = 0 on themselves. Every row with a
+  free-surface particle in its support counts its missing neighbours as ghosts
+  carrying the linear field
   that is its own P_i and zero on that surface: a diagonal term, so the matrix
   stays symmetric (:func:`parmps.core.kernels.surface_ghost_diagonal`). The
   corrected gradient is exact for that linear field over a surface particle's
