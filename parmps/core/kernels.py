@@ -429,18 +429,24 @@ def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradie
 
 
 @numba.njit(cache=True, inline="always")
+def _row_length(vectors, i, d):
+    """The Euclidean length of row i of ``vectors`` (its first d components)."""
+    total = 0.0
+    for k in range(d):
+        total += vectors[i, k] * vectors[i, k]
+    return np.sqrt(total)
+
+
+@numba.njit(cache=True, inline="always")
 def _correct_normal_component(indptr, cols, position, has_pressure, radius, scale, gradient,
                               normal, min_eigenvalue, rows, d):
     corrected = 0
     for i in range(gradient.shape[0]):
         if not rows[i]:
             continue
-        length = 0.0
-        for k in range(d):
-            length += normal[i, k] * normal[i, k]
+        length = _row_length(normal, i, d)
         if length <= 0.0:
             continue
-        length = np.sqrt(length)
         # n . A_i n, the moment matrix along the normal.
         along = 0.0
         for p in range(indptr[i], indptr[i + 1]):
@@ -730,12 +736,9 @@ def _surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_r
     vectors = np.empty((d, d))
     direction = np.empty(d)
     for i in range(n_rows):
-        length = 0.0
-        for k in range(d):
-            length += raw[i, k] * raw[i, k]
+        length = _row_length(raw, i, d)
         if length <= 0.0:
             continue
-        length = np.sqrt(length)
         # The weighted spread of the free-surface particles about their centre: the
         # surface's normal is its direction of least spread. Positions relative to i.
         total = 0.0
