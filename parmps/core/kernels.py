@@ -345,6 +345,31 @@ def _smallest_eigenvalue(a, work):
 
 
 @numba.njit(cache=True, inline="always")
+def _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d):
+    """Row i's moment matrix ``A_i = scale sum_j r_ij (x) r_ij w_ij / r_ij^2`` over its
+    neighbours with a pressure, into ``a`` (d×d): the identity on the full lattice with
+    scale = d/n0."""
+    for k in range(d):
+        for m in range(d):
+            a[k, m] = 0.0
+    for p in range(indptr[i], indptr[i + 1]):
+        j = cols[p]
+        if not has_pressure[j]:
+            continue
+        r2 = pair_distance2(position, i, j, d)
+        w = _weight_of_r2(r2, radius)
+        if w > 0.0:
+            for k in range(d):
+                for m in range(k, d):
+                    a[k, m] += pair_component(position, i, j, k) * \
+                        pair_component(position, i, j, m) * w / r2
+    for k in range(d):
+        for m in range(k, d):
+            a[k, m] *= scale
+            a[m, k] = a[k, m]
+
+
+@numba.njit(cache=True, inline="always")
 def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradient,
                       min_eigenvalue, rows, d):
     a = np.empty((d, d))
@@ -354,24 +379,7 @@ def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradi
     for i in range(n_rows):
         if rows is not None and not rows[i]:
             continue
-        for k in range(d):
-            for m in range(d):
-                a[k, m] = 0.0
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if not has_pressure[j]:
-                continue
-            r2 = pair_distance2(position, i, j, d)
-            w = _weight_of_r2(r2, radius)
-            if w > 0.0:
-                for k in range(d):
-                    for m in range(k, d):
-                        a[k, m] += pair_component(position, i, j, k) * \
-                            pair_component(position, i, j, m) * w / r2
-        for k in range(d):
-            for m in range(k, d):
-                a[k, m] *= scale
-                a[m, k] = a[k, m]
+        _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
         if d == 2:
             trace = a[0, 0] + a[1, 1]
             det = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
@@ -440,6 +448,7 @@ def _row_length(vectors, i, d):
 @numba.njit(cache=True, inline="always")
 def _correct_normal_component(indptr, cols, position, has_pressure, radius, scale, gradient,
                               normal, min_eigenvalue, rows, d):
+    a = np.empty((d, d))
     corrected = 0
     for i in range(gradient.shape[0]):
         if not rows[i]:
@@ -448,19 +457,12 @@ def _correct_normal_component(indptr, cols, position, has_pressure, radius, scal
         if length <= 0.0:
             continue
         # n . A_i n, the moment matrix along the normal.
+        _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
         along = 0.0
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if not has_pressure[j]:
-                continue
-            r2 = pair_distance2(position, i, j, d)
-            w = _weight_of_r2(r2, radius)
-            if w > 0.0:
-                rn = 0.0
-                for k in range(d):
-                    rn += pair_component(position, i, j, k) * normal[i, k]
-                along += rn * rn * w / (r2 * length * length)
-        along *= scale
+        for k in range(d):
+            for m in range(d):
+                along += normal[i, k] * a[k, m] * normal[i, m]
+        along /= length * length
         if along < min_eigenvalue or along >= 1.0:
             continue
         component = 0.0
@@ -654,14 +656,6 @@ def variable_density_poisson_rows(indptr, cols, position, radius, row_number, is
 
 
 @numba.njit(cache=True, inline="always")
-def _is_set(normal, i, d):
-    for k in range(d):
-        if normal[i, k] != 0.0:
-            return True
-    return False
-
-
-@numba.njit(cache=True, inline="always")
 def _surface_normals(indptr, cols, position, is_surface, radius, n_rows, d):
     normal = np.zeros((n_rows, d))
     for i in range(n_rows):
@@ -687,11 +681,8 @@ def _surface_normals(indptr, cols, position, is_surface, radius, n_rows, d):
             size += w * np.sqrt(r2)
             for k in range(d):
                 normal[i, k] -= w * pair_component(position, i, j, k)
-        length2 = 0.0
-        for k in range(d):
-            length2 += normal[i, k] * normal[i, k]
         # A full neighbourhood's sum is rounding error, not a direction.
-        if length2 <= (1e-9 * size) ** 2:
+        if _row_length(normal, i, d) <= 1e-9 * size:
             for k in range(d):
                 normal[i, k] = 0.0
     return normal
@@ -839,7 +830,7 @@ def _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surfa
             continue
         if is_surface[i]:
             extra[i] = undirected
-        if not _is_set(normal, i, d):
+        if _row_length(normal, i, d) <= 0.0:
             continue
         # The missing neighbours' first moment along the normal: minus the present ones'.
         moment = 0.0
