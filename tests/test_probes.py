@@ -4,9 +4,12 @@ Lobovsky case's set-up, and the same values on 1, 2 and 3 ranks.
 - Sums over a full lattice normalise to 1; a Shepard average reproduces a linear
   field at a lattice node; a point with too little fluid reads NaN.
 - Splitting the particles between ranks changes no sum (each rank adds its owned ones).
+- A level line reads a still layer's depth H within 2 % (its fill integrated) and its
+  surface within l0/4 (the highest crossing), in 2D and 3D; over a jet passing above a
+  shallow layer the depth reads the layer, the crossing the jet's top.
 - The still tank: a pressure probe at y = H/4 reads rho g (H - y) within 2 % averaged
-  over 0.5-2 s, a wall probe beside it too, the level reads H within a spacing and the
-  force on a side wall rho g H^2 / 2 per metre within 2 %.
+  over 0.5-2 s, a wall probe beside it too, the level reads H within 2 % (the crossing
+  within a spacing) and the force on a side wall rho g H^2 / 2 per metre within 2 %.
 - A force probe on a body reads the coupling's sum over its nodes.
 - Under mpirun the dam break's probes, one with its support across a slab edge, read the
   same on 1, 2 and 3 ranks.
@@ -25,8 +28,8 @@ from parmps import config, schema, validation
 from parmps.core import scene
 from parmps.core.particles import FLUID, WALL
 from parmps.errors import CaseError
-from parmps.probes.sampling import (OCCUPIED_WEIGHT, SampleRows, kernel_sums, lattice_sum,
-                                    shepard_pressure, surface_height)
+from parmps.probes.sampling import (SampleRows, column_end, kernel_sums, lattice_sum,
+                                    mean_sum, shepard_pressure, surface_height, water_depth)
 from parmps.tools import analysis
 
 SPACING = 0.01
@@ -88,21 +91,68 @@ def test_splitting_the_particles_between_ranks_changes_no_sum():
         assert part[80, 0] > 0 and part[:80, 2].any()
 
 
-def test_level_of_a_still_layer_reads_its_depth():
-    depth = 0.2
-    fluid = _lattice(20, 20)
-    wall = _lattice(24, 4, x0=-0.02, y0=-0.04)
-    position = np.vstack([fluid, wall])
-    kind = np.r_[np.full(len(fluid), FLUID), np.full(len(wall), WALL)]
+def _layers(d, layers, spacing=SPACING):
+    """Fluid layers (bottom, top) 0.2 m wide (square in 3D) on a floor of 4 wall layers;
+    positions (n, d), the last axis vertical."""
+    def block(count, lower):
+        index = np.meshgrid(*[np.arange(c) for c in count], indexing="ij")
+        return np.column_stack([lower[a] + (index[a].ravel() + 0.5) * spacing
+                                for a in range(d)])
+    fluid = [block([20] * (d - 1) + [round((top - bottom) / spacing)],
+                   [0.0] * (d - 1) + [bottom]) for bottom, top in layers]
+    wall = block([24] * (d - 1) + [4], [-0.02] * (d - 1) + [-0.04])
+    position = np.vstack(fluid + [wall])
+    kind = np.r_[np.full(len(position) - len(wall), FLUID), np.full(len(wall), WALL)]
+    return position, kind
+
+
+def _level_row(d, x, heights):
+    return SampleRows([[x] * (d - 1) + [heights[0]]], [[0.0] * (d - 1) + [1.0]],
+                      [heights[1] - heights[0]], [len(heights)], [2 * SPACING])
+
+
+def _readings(d, x, layers):
     heights = np.arange(0.0, 0.3, SPACING / 4)
-    rows = SampleRows([[0.1, 0.0]], [[0.0, 1.0]], [SPACING / 4], [len(heights)],
-                      [2 * SPACING])
-    sums = _sums(rows, position, kind, np.zeros(len(position)))
-    assert surface_height(sums, lattice_sum(2.0), heights) == pytest.approx(depth,
-                                                                            abs=0.25 * SPACING)
-    assert sums[0, OCCUPIED_WEIGHT] / lattice_sum(2.0) > 0.5
-    dry = _sums(rows, wall, np.full(len(wall), WALL), np.zeros(len(wall)))
-    assert surface_height(dry, lattice_sum(2.0), heights) < 0.5 * SPACING
+    position, kind = _layers(d, layers)
+    sums = _sums(_level_row(d, x, heights), position, kind, np.zeros(len(position)))
+    return (water_depth(sums, mean_sum(2.0, d), heights),
+            surface_height(sums, lattice_sum(2.0, d), heights))
+
+
+# The line between two columns of particles (x = 0.1), a quarter spacing off one, on one.
+LINES = (0.1, 0.1025, 0.105)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("x", LINES)
+def test_level_of_a_still_layer_reads_its_depth(d, x):
+    depth = 0.2
+    gauged, crossing = _readings(d, x, [(0.0, depth)])
+    # The depth integrates the fill, whose mean on a square lattice depends on where the
+    # line lies among the particles: measured -1.5 % between two columns, +1.5 % on one.
+    assert gauged == pytest.approx(depth, rel=0.02)
+    assert crossing == pytest.approx(depth, abs=0.25 * SPACING)
+    dry = _readings(d, x, [])
+    assert dry[0] == 0.0 and dry[1] < 0.5 * SPACING
+
+
+@pytest.mark.parametrize("d", [2, 3])
+@pytest.mark.parametrize("gap", [10, 3])
+def test_a_jet_above_a_shallow_layer_reads_the_layers_depth(d, gap):
+    """A sheet of water ``gap`` spacings above a 5 cm layer, 5 cm thick: the gauge reads the
+    layer (its support of 2 l0 reaches across a gap of 3), the crossing reads the jet's top."""
+    layer, jet = 0.05, (0.05 + gap * SPACING, 0.10 + gap * SPACING)
+    gauged, crossing = _readings(d, 0.1, [(0.0, layer), jet])
+    assert gauged == pytest.approx(layer, rel=0.02)
+    assert crossing == pytest.approx(jet[1], abs=0.25 * SPACING)
+
+
+def test_the_fill_column_ends_at_the_gap_below_water_passing_over():
+    fill = np.array([1.0, 1.0, 0.6, 0.3, 0.1, 0.05, 0.08, 0.5, 1.0, 0.4, 0.0])
+    assert column_end(fill) == 5
+    # A ripple smaller than the rise of a separate body of water does not end the column.
+    assert column_end(np.array([1.0, 0.45, 0.1, 0.15, 0.05, 0.0, 0.0])) == 6
+    assert column_end(np.ones(4)) == 3
 
 
 # -- the case section -----------------------------------------------------------------
@@ -130,6 +180,10 @@ BAD_PROBES = {
                                "missing key 'probe[0] 'a'.normal'"),
     "normal along the segment": ('name = "a"\nkind = "force"\nsegment = [[0.2, 0.0], '
                                  '[0.2, 0.2]]\nnormal = [0.0, 1.0]', "is not perpendicular"),
+    "reading for pressure": ('name = "a"\nkind = "pressure"\nposition = [0.1, 0.1]\n'
+                             'reading = "crossing"', "probe[0] 'a'.reading is a key of a level"),
+    "bad reading": ('name = "a"\nkind = "level"\nline = [[0.1, 0.0], [0.1, 0.3]]\n'
+                    'reading = "top"', "probe[0].reading must be"),
     "bad name": ('name = "a/b"\nkind = "pressure"\nposition = [0.1, 0.1]', "probe[0].name"),
     "unknown key": ('name = "a"\nkind = "pressure"\nposition = [0.1, 0.1]\nradus = 2.0',
                     "did you mean 'radius'"),
@@ -197,6 +251,13 @@ line = [[0.1, 0.0], [0.1, 0.3]]
 interval = 0.01
 
 [[probe]]
+name = "level_crossing"
+kind = "level"
+line = [[0.1, 0.0], [0.1, 0.3]]
+reading = "crossing"
+interval = 0.01
+
+[[probe]]
 name = "right_wall"
 kind = "force"
 segment = [[0.2, 0.0], [0.2, 0.3]]
@@ -228,12 +289,15 @@ def test_still_tank_probes_read_hydrostatics(still_tank):
         mean = analysis.window_mean(t, p, 0.5, 2.0)
         assert abs(mean / (rho * g * (depth - 0.05)) - 1.0) < 0.02, (name, mean)
     t, level = analysis.read_probe(result, "level")
+    # The depth between two columns of particles (-1.5 % on a lattice, the test above).
+    assert abs(analysis.window_mean(t, level, 0.5, 2.0) / depth - 1.0) < 0.02
+    t, level = analysis.read_probe(result, "level_crossing")
     gauged = analysis.window_mean(t, level, 0.5, 2.0)
     assert abs(gauged - depth) < case["particles"]["spacing"]
     t, force = analysis.read_probe(result, "right_wall")
     assert force.shape == (len(t), 2)
     mean_fx = analysis.window_mean(t, force[:, 0], 0.5, 2.0)
-    # Against the water the gauge reads (measured: level 0.1995 m for 0.2 m; the force
+    # Against the water the crossing reads (measured: level 0.1995 m for 0.2 m; the force
     # +0.03 % of rho g level^2 / 2, -0.51 % of rho g H^2 / 2; with P = 0 on the surface
     # particles, the condition before, 0.1983 m, -1.4 % and -3.1 %).
     assert abs(mean_fx / (0.5 * rho * g * gauged ** 2) - 1.0) < 0.02, (mean_fx, gauged)

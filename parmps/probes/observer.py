@@ -14,8 +14,9 @@ import os
 import numpy as np
 
 from parmps.io.series import Series
-from parmps.probes.sampling import (SampleRows, kernel_sums, lattice_sum, shepard_pressure,
-                                    surface_height)
+from parmps.probes.sampling import (SampleRows, kernel_sums, lattice_sum, mean_sum,
+                                    shepard_pressure,
+                                    surface_height, water_depth)
 from parmps.probes.settings import rest_positions
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
@@ -38,7 +39,6 @@ class Probe:
         self.kind = spec["kind"]
         self.spec = spec
         self.radius = spec["radius"] * spacing
-        self.full_sum = lattice_sum(spec["radius"])
         self.min_fill = spec["min_fill"]
         self.shape = (2,) if self.kind in ("force", "displacement") else ()
         self.rest = rest
@@ -52,11 +52,12 @@ class Probe:
         if self.kind == "pressure":
             self.row = (np.asarray(spec["position"]) + shift, (1.0, 0.0), spacing, 1)
         elif self.kind == "level":
-            (x, y0), (_, y1) = spec["line"]
+            bottom, top = (np.asarray(p, float) for p in spec["line"])
             step = 0.25 * spacing
-            count = int(math.floor((y1 - y0) / step + 1e-9)) + 1
-            self.row = ((x, y0), (0.0, 1.0), step, count)
-            self.heights = y0 + step * np.arange(count)
+            count = int(math.floor((top[-1] - bottom[-1]) / step + 1e-9)) + 1
+            # Up the last axis, the vertical one.
+            self.row = (bottom, np.eye(len(bottom))[-1], step, count)
+            self.heights = bottom[-1] + step * np.arange(count)
         elif spec["segment"]:
             a, b = (np.asarray(p, float) for p in spec["segment"])
             length = math.hypot(*(b - a))
@@ -66,12 +67,18 @@ class Probe:
             self.row = (a + 0.5 * self.ds * tangent + shift, tangent, self.ds, count)
         else:
             self.row = None
+        dimension = len(self.row[0]) if self.row else 2
+        self.full_sum = lattice_sum(spec["radius"], dimension)
+        # The depth integrates the fill: its mean over the water must be 1, not its peak.
+        self.mean_sum = mean_sum(spec["radius"], dimension)
 
     def attributes(self):
         out = {"kind": self.kind, "units": UNITS[self.kind]}
         for key in ("position", "normal", "line", "segment", "nodes"):
             if self.spec[key] not in (None, []):
                 out[key] = np.asarray(self.spec[key], float)
+        if self.kind == "level":
+            out["reading"] = self.spec["reading"]
         if self.spec["body"]:
             out["body"] = self.spec["body"]
         if self.row is not None:
@@ -90,6 +97,8 @@ class Probe:
         if self.kind == "pressure":
             return float(shepard_pressure(sums, self.full_sum, self.min_fill)[0])
         if self.kind == "level":
+            if self.spec["reading"] == "depth":
+                return water_depth(sums, self.mean_sum, self.heights)
             return surface_height(sums, self.full_sum, self.heights)
         if self.row is None:
             return np.asarray(bodies[self.spec["body"]].total_fluid_force(), float)

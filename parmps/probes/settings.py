@@ -21,7 +21,7 @@ SECTIONS = {
         "name": Key("str", doc="names /probes/<name> in result.h5 and OUTDIR/probes/<name>.csv"),
         "kind": Key("str", choices=KINDS,
                     doc="pressure: a Shepard average of the fluid's pressure around a point; "
-                        "level: the free-surface height along a vertical line; force: the "
+                        "level: the water's height along a vertical line; force: the "
                         "fluid's force on a wall segment or on a body; displacement: the "
                         "mean displacement of some of a body's nodes from their rest "
                         "positions"),
@@ -31,6 +31,12 @@ SECTIONS = {
                           "fluid; the sample points move half a spacing along it, onto the "
                           "centre line of the first fluid layer"),
         "line": Key("points", [], doc="level: [[x, y_bottom], [x, y_top]], vertical [m]"),
+        "reading": Key("str", "depth", choices=("depth", "crossing"),
+                       doc="level: depth, y_bottom plus the integral of the fluid fill over "
+                           "the water column standing on the line's bottom (a wave gauge: a "
+                           "jet passing above does not count); crossing, the highest height "
+                           "at which the fill falls through 0.5 (a jet's top reads as the "
+                           "level)"),
         "segment": Key("points", [], doc="force: the wall segment [[x0, y0], [x1, y1]] [m]"),
         "body": Key("str", "", doc="force: the body's name (the sum over its nodes); "
                                    "displacement: the body whose nodes are followed"),
@@ -68,6 +74,8 @@ def check(case):
             if given and key not in _GEOMETRY[kind]:
                 raise CaseError(f"{label}.{key} is not a key of a {kind} probe (it takes "
                                 f"{', '.join(_GEOMETRY[kind])})")
+        if kind != "level" and probe["reading"] != "depth":
+            raise CaseError(f"{label}.reading is a key of a level probe only")
         if probe["normal"] is not None and math.hypot(*probe["normal"]) == 0.0:
             raise CaseError(f"{label}.normal must not be zero")
         if kind == "pressure":
@@ -81,7 +89,8 @@ def check(case):
                 raise CaseError(f"missing key '{label}.line': a level probe needs "
                                 f"[[x, y_bottom], [x, y_top]]" if not line else
                                 f"{label}.line must have 2 points, got {len(line)}")
-            if line[0][0] != line[1][0] or not line[1][1] > line[0][1]:
+            # Vertical: along the last axis, the gravity axis of every case.
+            if line[0][:-1] != line[1][:-1] or not line[1][-1] > line[0][-1]:
                 raise CaseError(f"{label}.line must be vertical and run upwards "
                                 f"([[x, y_bottom], [x, y_top]]), got {line}")
             for point in line:
