@@ -11,7 +11,8 @@ from mpi4py import MPI
 
 from conftest import error_lines, run_parmps
 from parmps import schema
-from parmps.core.particles import FLUID, WALL, Particles
+from parmps.core.particles import FLUID, SOLID, WALL, Particles
+from parmps.coupling.weak import light_bodies
 from parmps.errors import RunFailure
 from parmps.io.frames import read_frames
 from parmps.run.escaped import EscapedFluid
@@ -68,8 +69,10 @@ def test_stop_stops_at_the_first_with_one_line(tmp_path):
                         + FIXED_DT, timeout=120)
     assert result.returncode == 1, result.stderr
     (line,) = error_lines(result.stderr)
-    assert line == ("parmps: error: step 9: particle 400 left the domain at (0.025, 0.3616) "
-                    "(through a wall, or the domain is too small)")
+    assert line.startswith("parmps: error: step 9: fluid particle 400 left the domain at "
+                           "(0.025, 0.3616), above y = 0.36 (domain.upper[1]), moving at "), line
+    assert line.endswith(" m/s (through a wall, or the domain is too small; "
+                         "domain.escaped_fluid = \"remove\" removes fluid spray instead)"), line
 
 
 def test_a_flood_past_the_fraction_stops_the_run(tmp_path):
@@ -168,6 +171,35 @@ def test_any_other_particle_outside_stops_with_its_owner():
     escaped = EscapedFluid(_case(), MPI.COMM_SELF, initial_fluid=1000)
     particles = _particles([FLUID, WALL], [[0.5, 1.2], [1.3, 0.5]])
     with pytest.raises(RunFailure, match=r"^step 5: particle 11 of the moving tank\[0\] left "
-                                         r"the domain at \(1\.3, 0\.5\); stop it earlier$"):
+                                         r"the domain at \(1\.3, 0\.5\), above x = 1 "
+                                         r"\(domain\.upper\[0\]\), moving at 2 m/s; "
+                                         r"stop it earlier$"):
         escaped.apply(particles, 5, 0.05, lambda pid: ("the moving tank[0]", "stop it earlier"))
     assert escaped.total == 0
+
+
+def test_a_body_node_outside_names_its_body_the_bound_and_the_domain_key():
+    """The membrane tube's failure (node 97 of its membrane through the domain's top at
+    0.1 m/s): the line names the node and its body, the bound crossed and the key to
+    change, and says nothing of density."""
+    case = _case()
+    case["body"] = [{"name": "membrane"}]
+    escaped = EscapedFluid(case, MPI.COMM_SELF, initial_fluid=1000)
+    particles = _particles([FLUID, SOLID], [[0.5, 0.5], [0.195, 1.0001]])
+    particles.body[1], particles.node[1] = 0, 97
+    particles.velocity[1] = [0.0, 0.1]
+    with pytest.raises(RunFailure) as caught:
+        escaped.apply(particles, 893, 0.893, _nobody)
+    assert str(caught.value) == (
+        "step 893: node 97 of body 'membrane' (particle 11) left the domain at (0.195, 1), "
+        "above y = 1 (domain.upper[1]), moving at 0.1 m/s: the body moved out of the domain "
+        "box. If that motion is expected, enlarge the domain (domain.lower, domain.upper); "
+        "if not, the body went unstable (its stiffness, damping and loads in [[body]] "
+        "'membrane')")
+
+
+def test_only_a_body_below_the_fluids_density_is_called_light():
+    # The membrane's nodes of mass rho l0^2 average to 0.9999999999999998 of a fluid
+    # particle's: not lighter, and no failure is blamed on it.
+    assert light_bodies({"membrane": 0.9999999999999998, "gate": 1.1}) == ""
+    assert light_bodies({"box": 0.1, "membrane": 1.0}) == "body 'box' (solid/fluid density 0.1)"

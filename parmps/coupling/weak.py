@@ -99,6 +99,10 @@ def fluid_force_parts(particles, rows, constants, gradient):
     return pressure_force, viscous_force, viscous_rate
 
 
+# How far below 1 a density ratio must lie to be a light body, not rounding.
+LIGHT_MARGIN = 1e-9
+
+
 def density_ratio(inverse_mass, constants):
     """A body's solid/fluid density: its moving nodes' mean mass over a fluid particle's
     (rho0 l0^d); inf for a body whose nodes are all fixed."""
@@ -108,6 +112,16 @@ def density_ratio(inverse_mass, constants):
         return np.inf
     return float(np.mean(1.0 / inverse_mass[moving])
                  / (constants.density * constants.spacing ** constants.dimension))
+
+
+def light_bodies(density_ratio):
+    """The bodies of ``density_ratio`` (name -> solid/fluid density) lighter than the fluid,
+    named with their ratio, or ''."""
+    # Beyond rounding: a body of the fluid's density reads 0.9999999999999998 as the mean
+    # of its nodes' masses, and is not lighter.
+    light = {name: ratio for name, ratio in density_ratio.items() if ratio < 1.0 - LIGHT_MARGIN}
+    return ", ".join(f"body '{name}' (solid/fluid density {ratio:.3g})"
+                     for name, ratio in light.items())
 
 
 def fluid_inside(particles, polygon, comm):
@@ -151,9 +165,7 @@ class WeakCoupling(Participant):
 
     def light_bodies(self):
         """The bodies lighter than the fluid named with their density ratio, or ''."""
-        light = {name: ratio for name, ratio in self.density_ratio.items() if ratio < 1.0}
-        return ", ".join(f"body '{name}' (solid/fluid density {ratio:.3g})"
-                         for name, ratio in light.items())
+        return light_bodies(self.density_ratio)
 
     def failure_cause(self):
         """The added-mass instability, when a body is lighter than the fluid."""

@@ -21,7 +21,10 @@ The run still stops, as it does with ``"stop"`` for any particle:
   inflow buffers go where the case moves them (inlets lie inside the domain and
   move into it; outflow buffers are removed at their outlet by the open
   boundaries), so one outside the box is a case or a body gone wrong, not
-  spray, and the participant that owns it names what to change.
+  spray. The message names the particle (a body's node by its body and index),
+  the domain bound it crossed and its speed; the participant that owns it (a
+  moving wall), or for a node the domain and the body's own keys, say what to
+  change.
 
 Every decision is taken from one allgather of each rank's few numbers, so
 every rank takes the same branch.
@@ -32,14 +35,15 @@ import logging
 import numpy as np
 
 from parmps.core.geometry import outside_box
-from parmps.core.particles import FLUID
+from parmps.core.particles import FLUID, KIND_NAMES
 from parmps.errors import RunFailure
 from parmps.run.schedule import WallInterval
 
 log = logging.getLogger(__name__)
 
 def _lowest_id(particles, mask):
-    """(id, x, y) of the lowest-id particle among the owned ``mask``, or None.
+    """(id, kind, body, node, speed, position) of the lowest-id particle among the owned
+    ``mask``, or None.
 
     The lowest id, not the first in memory: the particle named is then the same
     on any rank count."""
@@ -47,11 +51,24 @@ def _lowest_id(particles, mask):
         return None
     index = np.flatnonzero(mask)
     first = index[np.argmin(particles.id[index])]
-    return (int(particles.id[first]),) + tuple(float(x) for x in particles.position[first])
+    return (int(particles.id[first]), int(particles.kind[first]), int(particles.body[first]),
+            int(particles.node[first]), float(np.linalg.norm(particles.velocity[first])),
+            tuple(float(x) for x in particles.position[first]))
 
 
 def _place(where):
     return ", ".join(f"{x:.4g}" for x in where)
+
+
+def _side(where, lower, upper):
+    """Which bound of the domain box a point lies beyond, as the key to change."""
+    for a, x in enumerate(where):
+        axis = "xyz"[a] if len(where) <= 3 else str(a)
+        if x < lower[a]:
+            return f"below {axis} = {lower[a]:.4g} (domain.lower[{a}])"
+        if x > upper[a]:
+            return f"above {axis} = {upper[a]:.4g} (domain.upper[{a}])"
+    return "on its boundary"
 
 
 class EscapedFluid:
@@ -72,6 +89,7 @@ class EscapedFluid:
         self.remove = domain["escaped_fluid"] == "remove"
         self.max_fraction = domain["max_escaped_fraction"]
         self.initial_fluid = int(initial_fluid)
+        self.body_names = [spec["name"] or f"body{k}" for k, spec in enumerate(case["body"])]
         self.total = 0  # removed so far, over every restart
         self.reported = 0  # the total the last log line gave (rank 0's is the one that counts)
         self.report = WallInterval() if report_seconds is None else WallInterval(report_seconds)
@@ -121,19 +139,30 @@ class EscapedFluid:
         return particles, max(item[1] for item in gathered)
 
     def _left(self, step, first, owner):
-        pid, *where = first
+        """The one line for a particle whose leaving stops the run: what it is, where it
+        left, how fast it moved, and what to change."""
+        pid, kind, body, node, speed, where = first
+        place = (f"left the domain at ({_place(where)}), "
+                 f"{_side(where, self.lower, self.upper)}, moving at {speed:.3g} m/s")
         found = owner(pid)
         if found is not None:
             description, advice = found
-            return (f"step {step}: particle {pid} of {description} left the domain at "
-                    f"({_place(where)}); {advice}")
-        return (f"step {step}: particle {pid} left the domain at ({_place(where)}) "
-                f"(through a wall, or the domain is too small)")
+            return f"step {step}: particle {pid} of {description} {place}; {advice}"
+        if body >= 0:
+            name = self.body_names[body]
+            return (f"step {step}: node {node} of body '{name}' (particle {pid}) {place}: the "
+                    f"body moved out of the domain box. If that motion is expected, enlarge "
+                    f"the domain (domain.lower, domain.upper); if not, the body went unstable "
+                    f"(its stiffness, damping and loads in [[body]] '{name}')")
+        advice = "through a wall, or the domain is too small"
+        if kind == FLUID:
+            advice += "; domain.escaped_fluid = \"remove\" removes fluid spray instead"
+        return f"step {step}: {KIND_NAMES[kind]} particle {pid} {place} ({advice})"
 
     def _count(self, removed, first, step, time):
         before = self.total
         self.total += removed
-        pid, *where = first
+        pid, where = first[0], first[-1]
         if self.total > self.limit:
             raise RunFailure(
                 f"step {step}: {self.total} fluid particles have left the domain, more than "
