@@ -14,6 +14,14 @@ class CaseError(Exception):
 
 
 class RunFailure(Exception):
-    """A run that started but could not go on (unstable, solver diverged). Exit status 1."""
+    """A run that started but could not go on (unstable, solver diverged). Exit status 1.
+
+    ``where``: the position the failure was seen at (a particle through a wall or out of
+    the domain), or None; a likely cause is then judged by what lies near it.
+    """
 
     exit_status = 1
+
+    def __init__(self, message, where=None):
+        super().__init__(message)
+        self.where = where

@@ -3,6 +3,7 @@ count and across a restart; "stop", a flood past domain.max_escaped_fraction and
 particle leaving stop the run with one line and exit status 1."""
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import h5py
 import numpy as np
@@ -12,7 +13,7 @@ from mpi4py import MPI
 from conftest import error_lines, run_parmps
 from parmps import schema
 from parmps.core.particles import FLUID, SOLID, WALL, Particles
-from parmps.coupling.weak import light_bodies
+from parmps.coupling.weak import REACH, WeakCoupling, light_bodies
 from parmps.errors import RunFailure
 from parmps.io.frames import read_frames
 from parmps.run.escaped import EscapedFluid
@@ -203,3 +204,17 @@ def test_only_a_body_below_the_fluids_density_is_called_light():
     # particle's: not lighter, and no failure is blamed on it.
     assert light_bodies({"membrane": 0.9999999999999998, "gate": 1.1}) == ""
     assert light_bodies({"box": 0.1, "membrane": 1.0}) == "body 'box' (solid/fluid density 0.1)"
+
+
+def test_a_failure_far_from_every_light_body_is_not_blamed_on_it():
+    """The elastic gate at the defaults stopped with a fluid particle in the far wall,
+    0.4 m (240 l0) from the gate, and the line blamed the gate (solid/fluid density 0.816):
+    a light body is named only when the failure lies within REACH spacings of its nodes."""
+    gate = SimpleNamespace(name="gate", position=np.array([[0.1, 0.0], [0.1, 0.08]]))
+    coupling = SimpleNamespace(density_ratio={"gate": 0.816},
+                               fluid=SimpleNamespace(constants=SimpleNamespace(spacing=0.01)),
+                               model=SimpleNamespace(bodies=[gate]))
+    named = "body 'gate' (solid/fluid density 0.816)"
+    assert WeakCoupling.light_bodies(coupling) == named
+    assert WeakCoupling.light_bodies(coupling, (0.1 + 0.99 * REACH * 0.01, 0.0)) == named
+    assert WeakCoupling.light_bodies(coupling, (0.501, 0.0017)) == ""

@@ -52,7 +52,7 @@ class StepperFailingAbove:
     def diagnostics(self, state):
         return {}
 
-    def failure_cause(self):
+    def failure_cause(self, where=None):
         return None
 
 

@@ -49,7 +49,7 @@ class ImplicitPressureCoupling(WeakCoupling):
     # nor its added-mass diagnosis of a failure applies.
     ANSWERS_A_STEP_LATE = False
 
-    def failure_cause(self):
+    def failure_cause(self, where=None):
         """For a light body: the explicit part of the exchange that still lags.
 
         The pressure answers a light node's motion, but the body's springs, area constraint
@@ -61,7 +61,7 @@ class ImplicitPressureCoupling(WeakCoupling):
         instead of the Courant step near 2e-3 s) ran both 0.3 at 10 U0 and 0.01 at 5 U0 to
         the end: the lag per step is what grows.
         """
-        light = self.light_bodies()
+        light = self.light_bodies(where)
         if not light:
             return None
         return (f"{light} lighter than the fluid in a fast flow: under coupling.scheme = "

@@ -101,6 +101,10 @@ def fluid_force_parts(particles, rows, constants, gradient):
 
 # How far below 1 a density ratio must lie to be a light body, not rounding.
 LIGHT_MARGIN = 1e-9
+# How far from a light body's nodes a failure may be blamed on it, in spacings: its
+# instability grows over about 60 steps (docs/validation.md, Stability map), in which
+# fluid it throws travels at most 30 l0 at a Courant number of 0.5.
+REACH = 30.0
 
 
 def density_ratio(inverse_mass, constants):
@@ -163,13 +167,20 @@ class WeakCoupling(Participant):
                         "the added-mass instability for it; \"implicit_pressure\" is not",
                         light)
 
-    def light_bodies(self):
-        """The bodies lighter than the fluid named with their density ratio, or ''."""
-        return light_bodies(self.density_ratio)
+    def light_bodies(self, where=None):
+        """The bodies lighter than the fluid named with their density ratio, or ''; with
+        ``where`` (a failure's position), only those with a node within REACH of it."""
+        ratios = self.density_ratio
+        if where is not None:
+            reach = REACH * self.fluid.constants.spacing
+            near = {body.name for body in self.model.bodies
+                    if np.min(np.linalg.norm(body.position - np.asarray(where), axis=1)) < reach}
+            ratios = {name: ratio for name, ratio in ratios.items() if name in near}
+        return light_bodies(ratios)
 
-    def failure_cause(self):
-        """The added-mass instability, when a body is lighter than the fluid."""
-        light = self.light_bodies() if self.ANSWERS_A_STEP_LATE else ""
+    def failure_cause(self, where=None):
+        """The added-mass instability, when a body near ``where`` is lighter than the fluid."""
+        light = self.light_bodies(where) if self.ANSWERS_A_STEP_LATE else ""
         if not light:
             return None
         return (f"the added-mass instability: {light} lighter than the fluid, and "

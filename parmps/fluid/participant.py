@@ -20,9 +20,10 @@ or coupling is a new participant, not a new branch in the step.
    only).
 
 ``check(particles, step, time)`` stops a step that went wrong for the
-participant (a blown-up body). ``failure_cause()``: a sentence naming the
-physical cause a failed run most likely had that this participant knows of
-(a coupling that is unstable for the case's bodies), or None; it must be the
+participant (a blown-up body). ``failure_cause(where)``: a sentence naming
+the physical cause a failed run most likely had that this participant knows of
+(a coupling that is unstable for the case's bodies), or None; ``where`` is the
+position the failure was seen at, or None; it must be the
 same on every rank. ``speed(time, until)`` is the largest speed the participant moves particles at
 over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
 and ``diagnostics()`` add columns to the run's diagnostics;
@@ -64,7 +65,7 @@ class Participant:
     def check(self, particles, step, time):
         """After the step: raise RunFailure if what this participant moves went wrong."""
 
-    def failure_cause(self):
+    def failure_cause(self, where=None):
         return None
 
     def diagnostics(self):

@@ -71,10 +71,10 @@ def advance(comm, state, stepper, observers, end, time_settings):
         except RunFailure as failure:
             # A blow-up shows as whatever breaks first (a spring, a particle out of the
             # domain, dt); the stepper may know the physics behind it.
-            cause = stepper.failure_cause()
+            cause = stepper.failure_cause(failure.where)
             if cause is None:
                 raise
-            raise RunFailure(f"{failure}. Likely cause: {cause}") from None
+            raise RunFailure(f"{failure}. Likely cause: {cause}", failure.where) from None
         state.particle_steps += total_particles
         state.elapsed = before + watch.elapsed()
         state.diagnostics = {"step": state.step, "time": state.time, "dt": state.dt,
@@ -114,7 +114,7 @@ def take_step(comm, state, stepper, dt, retries):
         except RunFailure as failure:
             if attempt == retries:
                 raise RunFailure(f"{failure} (the step failed {retries + 1} times, "
-                                 f"down to dt = {dt:.3g} s)") from None
+                                 f"down to dt = {dt:.3g} s)", failure.where) from None
             if comm.rank == 0:
                 log.warning("redoing step %d with dt = %.3g s, half its dt; it failed: %s",
                             run_at_start["step"] + 1, dt / 2, failure)

@@ -127,8 +127,8 @@ class EscapedFluid:
         others = [item[3] for item in gathered if item[3] is not None]
         fluids = [item[2] for item in gathered if item[2] is not None]
         if others or (fluids and not self.remove):
-            raise RunFailure(self._left(step, min(others if self.remove else others + fluids),
-                                        owner))
+            first = min(others if self.remove else others + fluids)
+            raise RunFailure(self._left(step, first, owner), where=first[-1])
         removed = sum(item[0] for item in gathered)
         if removed:
             if count:
@@ -169,7 +169,7 @@ class EscapedFluid:
                 f"domain.max_escaped_fraction = {self.max_fraction:g} of the "
                 f"{self.initial_fluid} at t = 0 (this step particle {pid} at ({_place(where)})"
                 f"): fluid pouring out is a leaking wall, a domain too small or an unstable "
-                f"run, not spray")
+                f"run, not spray", where=where)
         if before == 0:
             others = f" with {removed - 1} other(s)" if removed > 1 else ""
             if self.comm.rank == 0:

@@ -92,4 +92,4 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step):
             f"{rectangles[k][2]} at ({x:.4g}, {y:.4g}) ({count} fluid particles inside walls); "
             f"the wall's pressure did not hold it back (weak PPE source: mps.density.relaxation, "
             f"mps.compressibility) or the step is too long for the flow (lower time.dt_max "
-            f"or time.cfl)")
+            f"or time.cfl)", where=(x, y))

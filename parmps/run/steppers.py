@@ -5,7 +5,7 @@ A stepper has ``DIAGNOSTICS`` (its own columns, name -> dtype), ``start(state)``
 ``advance(state, dt)`` (from ``state.time``; the step is ``state.step + 1``),
 ``check(state)`` (after the step: stop loudly if it went wrong; the fluid stepper also
 drops the fluid that left the domain, :mod:`parmps.run.escaped`),
-``failure_cause()`` (a sentence the loop adds to a failure's message, or None),
+``failure_cause(where)`` (a sentence the loop adds to a failure's message, or None),
 ``diagnostics(state)`` and ``progress(state)`` (a progress line's text), and
 ``checkpoint_state()`` / ``restore_state(saved)`` for checkpoints.
 
@@ -181,8 +181,8 @@ class FluidStepper:
             values.update(participant.diagnostics())
         return values
 
-    def failure_cause(self):
-        causes = [cause for cause in (p.failure_cause() for p in self.participants)
+    def failure_cause(self, where=None):
+        causes = [cause for cause in (p.failure_cause(where) for p in self.participants)
                   if cause is not None]
         return "; ".join(causes) or None
 
@@ -243,7 +243,7 @@ class SolidStepper:
         return {"max_speed": self.model.max_speed(),
                 "kinetic_energy": self.model.kinetic_energy()}
 
-    def failure_cause(self):
+    def failure_cause(self, where=None):
         return None
 
     def progress(self, state):
