@@ -1,4 +1,4 @@
-"""Slab decomposition: distribute, halo, refresh, migration, rebalance, refusals, aborts.
+"""Domain decompositions: distribute, halo, refresh, migration, rebalance, refusals, aborts.
 
 The checks live in tests/mpi/decomposition_worker.py. They run here on one rank
 in-process, and under ``mpirun -n 2`` and ``mpirun -n 3 --oversubscribe`` once
@@ -72,7 +72,7 @@ def test_exception_on_one_rank_aborts_the_job(ranks):
 
 
 def test_pack_round_trip():
-    from parmps.parallel.slabs import pack, unpack_new
+    from parmps.parallel.exchange import pack, unpack_new
     rng = np.random.default_rng(0)
     arrays = [rng.normal(size=7), rng.integers(0, 9, size=(7, 3)).astype(np.int64),
               (rng.normal(size=(7, 2)) > 0), np.arange(7, dtype=np.int8),

@@ -237,7 +237,7 @@ class OpenBoundaries(Participant):
 
     def apply(self, particles, time, owner, dt=0.0):
         """Move the buffers, turn particles that left them into fluid, add entering
-        columns (kept where ``owner(x) == rank``), remove fluid past the outlets.
+        columns (kept where ``owner(position) == rank``), remove fluid past the outlets.
 
         Returns owned-only Particles.
         """
@@ -260,7 +260,7 @@ class OpenBoundaries(Participant):
             columns = inlet.new_columns(time)
             if len(columns):
                 entering = inlet.particles(columns, time)
-                keep = np.flatnonzero(owner(entering.position[:, 0]) == comm.rank)
+                keep = np.flatnonzero(owner(entering.position) == comm.rank)
                 parts.append(entering.select(keep))
         result = Particles.concatenate(parts) if len(parts) > 1 else parts[0]
         counts = np.array([converted, removed], np.int64)

@@ -1,9 +1,15 @@
 """Case section of the decomposition: halo, load balance, migration."""
 
 from parmps.config import Key, Section
+from parmps.parallel import CHOICES
 
 SECTIONS = {
     "parallel": Section({
+        "decomposition": Key("str", "auto", choices=CHOICES,
+                             doc="how the domain is cut over the ranks (parmps.parallel."
+                                 "DECOMPOSITIONS): slabs along x, blocks of a px x py (x pz) "
+                                 "rank grid, or auto: slabs while the grid with the fewest "
+                                 "ghosts for the domain cuts along x alone, else blocks"),
         "halo_skin": Key("float", 0.6, ge=0.0, le=5.0,
                          doc="extra halo width and neighbour-list skin, in l0"),
         "rebalance_interval": Key("int", 20, gt=0, doc="steps between load-balance checks"),
@@ -11,7 +17,7 @@ SECTIONS = {
                                    doc="rebalance when max/mean particles exceeds this"),
         "migration_margin": Key("float", 0.5, ge=0.0, le=5.0,
                                 doc="particles migrate once one is this far (in l0) outside "
-                                    "its slab; halo and slabs widen by it (0: every step)"),
+                                    "its region; halo and regions widen by it (0: every step)"),
     }),
 }
 

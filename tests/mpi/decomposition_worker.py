@@ -1,4 +1,4 @@
-"""Checks of parmps.parallel.slabs, run on every rank of a job.
+"""Checks of the domain decompositions (parmps.parallel), run on every rank of a job.
 
 Usage: mpirun -n N python tests/mpi/decomposition_worker.py checks RESULT.json
        mpirun -n N python tests/mpi/decomposition_worker.py abort
@@ -18,7 +18,8 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps import config, schema
-from parmps.parallel.slabs import SlabDecomposition, by_id_blocks
+from parmps.parallel import decomposition_class
+from parmps.parallel.exchange import by_id_blocks
 from parmps.errors import CaseError
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
 from parmps.parallel.mpi import abort_on_exception, agree, assert_all
@@ -87,7 +88,7 @@ def check_ownership(comm, decomposition, particles, n_total, what):
 def check_distribute_counts(comm):
     """Known lattices give known per-rank counts and edges between columns."""
     expected = {1: [120], 2: [60, 60], 3: [40, 40, 40]}
-    decomposition = SlabDecomposition(comm, make_case(0.0, 24.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 24.0))
     mine = decomposition.distribute(scene(lattice(24, 5)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
@@ -99,7 +100,7 @@ def check_distribute_counts(comm):
     check_ownership(comm, decomposition, mine, 120, "24x5 lattice")
     # 25 columns of 4: the edges go to the column gap nearest each quantile.
     expected = {1: [100], 2: [48, 52], 3: [32, 36, 32]}
-    decomposition = SlabDecomposition(comm, make_case(0.0, 25.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 25.0))
     mine = decomposition.distribute(scene(lattice(25, 4)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
@@ -108,9 +109,10 @@ def check_distribute_counts(comm):
     check_ownership(comm, decomposition, mine, 100, "25x4 lattice")
 
 
-def _expected_ghosts(decomposition, global_x, rank):
+def _expected_ghosts(decomposition, global_position, rank):
     """Ghost ids of ``rank`` by brute force: left neighbour's then right neighbour's, by id."""
-    owner = decomposition.owner(global_x)
+    owner = decomposition.owner(global_position)
+    global_x = global_position[:, 0]
     edges = decomposition.edges
     ids = np.arange(len(global_x))
     from_left = ids[(owner == rank - 1) & (edges[rank] - global_x < decomposition.halo_width)] \
@@ -126,11 +128,11 @@ def check_halo(comm):
     global_scene = random_scene(1500, 30.0, seed=2)
     # Some particles exactly at the halo distance and on lattice-like repeated x.
     global_scene.position[:40, 0] = np.repeat(np.linspace(5.0, 25.0, 10), 4)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 30.0))
     mine = decomposition.distribute(global_scene)
     halo = decomposition.build_halo(mine)
     n = halo.n_owned
-    expected = _expected_ghosts(decomposition, global_scene.position[:, 0], comm.rank)
+    expected = _expected_ghosts(decomposition, global_scene.position, comm.rank)
     assert_all(comm, n == mine.n_owned and halo.n_ghost == decomposition.n_ghost,
                "build_halo changed n_owned or miscounted ghosts")
     assert_all(comm, np.array_equal(halo.id[n:], expected),
@@ -159,7 +161,7 @@ def check_halo(comm):
 
 def check_refresh(comm):
     """refresh() copies the owners' current values into the ghosts, in place, any dtype/shape."""
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 30.0))
     halo = decomposition.build_halo(decomposition.distribute(random_scene(1500, 30.0, seed=3)))
     n, ids = halo.n_owned, halo.id
     total = len(halo)
@@ -228,11 +230,17 @@ def _moved_x(x, ids, edges, pattern):
     return x
 
 
+def _with_x(position, x):
+    moved = position.copy()
+    moved[:, 0] = x
+    return moved
+
+
 def check_migrate(comm):
     """Migration keeps every id exactly once and delivers each to its new owner."""
     for pattern in ("small", "far"):
         global_scene = random_scene(2000, 30.0, seed=4)
-        decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+        decomposition = decomposition_class("slabs")(comm, make_case(0.0, 30.0))
         mine = decomposition.distribute(global_scene)
         halo = decomposition.build_halo(mine)
         edges = decomposition.edges
@@ -241,7 +249,7 @@ def check_migrate(comm):
         migrated = decomposition.migrate(halo)
         assert_all(comm, migrated.n_ghost == 0, "migrate kept ghosts")
         check_ownership(comm, decomposition, migrated, 2000, f"migrate ({pattern})")
-        expected = np.flatnonzero(decomposition.owner(new_x) == comm.rank)
+        expected = np.flatnonzero(decomposition.owner(_with_x(global_scene.position, new_x)) == comm.rank)
         assert_all(comm, np.array_equal(migrated.id, expected),
                    f"migrate ({pattern}): owned ids differ from the brute-force owners")
         assert_all(comm, np.array_equal(migrated.position[:, 0], new_x[migrated.id]),
@@ -252,7 +260,7 @@ def check_migrate(comm):
             counted = comm.allreduce(len(mine_on_edge))
             assert_all(comm, counted == len(on_edge), "a particle on an edge is owned "
                                                       f"{counted} times for {len(on_edge)}")
-            right = decomposition.owner(new_x[mine_on_edge])
+            right = decomposition.owner(_with_x(global_scene.position, new_x)[mine_on_edge])
             assert_all(comm, np.all(right == comm.rank), "edge particle not with the right slab")
 
 
@@ -260,7 +268,7 @@ def check_rebalance(comm):
     """A skewed load comes back within the tolerance at once; a balanced one is left alone."""
     tolerance = 1.10
     global_scene = random_scene(6000, 60.0, seed=5)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 60.0, rebalance_interval=4))
     mine = decomposition.distribute(global_scene)
     mine.position[:, 0] = 60.0 * (mine.position[:, 0] / 60.0) ** 3
     mine = decomposition.migrate(mine)
@@ -285,7 +293,7 @@ def check_rebalance(comm):
 def check_rebalance_projection(comm):
     """Within the tolerance but drifting: a periodic check rebalances ahead of the crossing."""
     global_scene = random_scene(6000, 60.0, seed=8)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 60.0, rebalance_interval=4))
     mine = decomposition.distribute(global_scene)
     mine = decomposition.rebalance(mine, step=4)  # balanced: the drift is measured from here
     assert_all(comm, decomposition.rebalance_count == 0, "a balanced load was rebalanced")
@@ -293,7 +301,7 @@ def check_rebalance_projection(comm):
         return
     # Move 6 % of the mean load from the last slab into the first: imbalance 1.06.
     mean = 6000 // comm.size
-    last = np.flatnonzero(decomposition.owner(global_scene.position[:, 0]) == comm.size - 1)
+    last = np.flatnonzero(decomposition.owner(global_scene.position) == comm.size - 1)
     moved = last[:int(0.06 * mean)]
     here = np.isin(mine.id, moved)
     mine.position[here, 0] = decomposition.edges[1] - 1.0 - 4.0 * mine.id[here] / 6000.0
@@ -324,7 +332,7 @@ def check_sweep(comm):
     kind[:len(walls)][np.abs(walls[:, 0] - nx / 2) > nx / 2 + 2] = DUMMY
     global_scene = scene(position, kind)
     n_total, n_walls = len(position), len(walls)
-    decomposition = SlabDecomposition(
+    decomposition = decomposition_class("slabs")(
         comm, make_case(-layers, nx + layers, rebalance_interval=interval))
     mine = decomposition.distribute(global_scene)
     worst_checked = worst = 1.0
@@ -363,7 +371,7 @@ def _errors(comm, action):
 def check_refusals(comm):
     """Too many ranks or too thin slabs: the same CaseError on every rank."""
     # A domain 5 wide holds one slab of the 3.7-wide halo.
-    message = _errors(comm, lambda: SlabDecomposition(comm, make_case(0.0, 5.0)))
+    message = _errors(comm, lambda: decomposition_class("slabs")(comm, make_case(0.0, 5.0)))
     messages = comm.allgather(message)
     if comm.size > 1:
         assert_all(comm, message is not None and len(set(messages)) == 1,
@@ -373,7 +381,7 @@ def check_refusals(comm):
         assert_all(comm, message is None, f"one rank refused: {message}")
     # Room for the slabs, but every particle in one narrow band: interior slabs too thin.
     band = scene(np.column_stack([np.linspace(50.0, 51.0, 3000), np.full(3000, 5.0)]))
-    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 100.0))
     message = _errors(comm, lambda: decomposition.distribute(band))
     messages = comm.allgather(message)
     if comm.size > 2:
@@ -383,7 +391,7 @@ def check_refusals(comm):
     else:  # two slabs have no interior slab: nothing is too thin
         assert_all(comm, message is None, f"refused without an interior slab: {message}")
     # After a rebalance: keep the old edges instead (a warning), never fail.
-    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0, rebalance_interval=1))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 100.0, rebalance_interval=1))
     mine = decomposition.distribute(random_scene(3000, 100.0, seed=6))
     edges = decomposition.edges.copy()
     mine.position[:, 0] = 50.0 + mine.id / 3000.0
@@ -396,7 +404,7 @@ def check_refusals(comm):
 
 def check_empty_rank(comm):
     """A rank with no particles still takes part in every collective call."""
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0, rebalance_interval=1))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 30.0, rebalance_interval=1))
     mine = decomposition.distribute(random_scene(600, 30.0, seed=7))
     # Everything moves to the first slab: the other ranks end up empty.
     mine.position[:, 0] = 0.01 * mine.id / 600.0
@@ -412,7 +420,7 @@ def check_empty_rank(comm):
 def check_by_id_blocks(comm):
     """Regrouping by id blocks gives one id-sorted array in rank order, for output."""
     global_scene = random_scene(1000, 30.0, seed=9)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 30.0))
     halo = decomposition.build_halo(decomposition.distribute(global_scene))
     block, offset, total = by_id_blocks(halo, comm)
     ids = all_ids(comm, block)
@@ -464,7 +472,7 @@ def check_lazy_migration(comm):
     """With a margin, particles stray up to it before migrating, and the halo stays complete."""
     margin = 0.5
     global_scene = random_scene(2000, 40.0, seed=10)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 40.0, migration_margin=margin))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 40.0, migration_margin=margin))
     assert_all(comm, decomposition.halo_width == HALO + margin
                and decomposition.min_slab_width == HALO + 2 * margin, "halo/slab widths")
     mine = decomposition.distribute(global_scene)
@@ -476,7 +484,7 @@ def check_lazy_migration(comm):
     mine = decomposition.migrate(decomposition.build_halo(mine))
     assert_all(comm, np.array_equal(mine.id, before) and decomposition.migration_count == 0,
                "particles within the margin migrated")
-    strays = np.count_nonzero(decomposition.owner(mine.position[:, 0]) != comm.rank)
+    strays = np.count_nonzero(decomposition.owner(mine.position) != comm.rank)
     if comm.size > 1:
         assert_all(comm, comm.allreduce(strays) > 0, "the test moved nobody out of a slab")
     # The halo covers every neighbour of the strays too.
