@@ -26,6 +26,7 @@ Contract shared by every implementation:
   uneven (or heading there); returns owned-only Particles.
 - ``owner(position)``: the owning rank of each row of an (n, d) array of
   positions (local, not collective; every position has exactly one owner).
+- ``box(rank)``: the region a rank owns, as a box (local).
 - ``neighbours``: the ranks this rank exchanges ghosts with (local).
 - ``update(particles, step)``: migrate, rebalance, build the halo, in that order.
 
@@ -99,6 +100,11 @@ class Decomposition(abc.ABC):
     @abc.abstractmethod
     def owner(self, position):
         """The rank owning each row of ``position`` ((n, d)); local."""
+
+    @abc.abstractmethod
+    def box(self, rank):
+        """(lower, upper) corners ((d,) arrays) of ``rank``'s region, +-inf where it is
+        open; regions tile space, half-open [lower, upper). Local."""
 
     @property
     @abc.abstractmethod

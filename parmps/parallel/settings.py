@@ -1,6 +1,7 @@
 """Case section of the decomposition: halo, load balance, migration."""
 
 from parmps.config import Key, Section
+from parmps.errors import CaseError
 from parmps.parallel import CHOICES
 
 SECTIONS = {
@@ -10,6 +11,10 @@ SECTIONS = {
                                  "DECOMPOSITIONS): slabs along x, blocks of a px x py (x pz) "
                                  "rank grid, or auto: slabs while the grid with the fewest "
                                  "ghosts for the domain cuts along x alone, else blocks"),
+        "grid": Key("ints", [], gt=0,
+                    doc="blocks: the rank grid [px, py] ([px, py, pz] in 3D), whose product "
+                        "is the rank count; empty: the grid with the fewest ghosts for the "
+                        "domain"),
         "halo_skin": Key("float", 0.6, ge=0.0, le=5.0,
                          doc="extra halo width and neighbour-list skin, in l0"),
         "rebalance_interval": Key("int", 20, gt=0, doc="steps between load-balance checks"),
@@ -23,4 +28,7 @@ SECTIONS = {
 
 
 def check(case):
-    pass
+    grid = case["parallel"]["grid"]
+    if grid and len(grid) != len(case["domain"]["lower"]):
+        raise CaseError(f"parallel.grid has {len(grid)} entries for a "
+                        f"{len(case['domain']['lower'])}D domain: give one per axis")

@@ -96,6 +96,16 @@ class SlabDecomposition(Decomposition):
         """The adjacent slabs' ranks (none past the ends)."""
         return [r for r in (self.left, self.right) if r != MPI.PROC_NULL]
 
+    def box(self, rank):
+        """(lower, upper) corners of ``rank``'s slab: x between its edges, all y (and z)."""
+        lower = np.full(self.dimension, -np.inf)
+        upper = np.full(self.dimension, np.inf)
+        if rank > 0:
+            lower[0] = self.edges[rank]
+        if rank < self.size - 1:
+            upper[0] = self.edges[rank + 1]
+        return lower, upper
+
     def describe(self):
         return f"{self.size} slab{'s' if self.size > 1 else ''} along x"
 
