@@ -6,7 +6,8 @@
   of validation/hydrostatic, like one rank.
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
-- A decomposition that cannot work is refused with exit status 2 and one line.
+- A decomposition that cannot work (slabs or blocks) is refused with exit status 2 and
+  one line.
 - An exception on one rank ends the whole job within seconds, never a hang.
 """
 
@@ -127,6 +128,25 @@ def test_slabs_thinner_than_the_halo_exit_2(tmp_path):
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
     assert "thinner than the halo" in lines[0] and "rank 1" in lines[0]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("grid, words", [
+    ([], "no grid of 3 ranks fits"),
+    ([3, 1], "cuts x into 3 blocks"),
+    ([2, 2], "product must be the rank count"),
+])
+def test_blocks_too_fine_for_the_halo_exit_2(tmp_path, grid, words):
+    # The 0.162 m halo in the 0.32 x 0.42 m tank leaves room for one block along x and two
+    # along y: no grid of 3 ranks.
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=blocks",
+                         "--set", f"parallel.grid={grid}"], ranks=3, timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1, result.stderr
+    assert words in lines[0], lines[0]
 
 
 @pytest.mark.mpi

@@ -29,15 +29,18 @@ def decomposition_class(name):
 
 def create_decomposition(comm, case):
     """The case's decomposition on ``comm`` (collective); "auto" chooses with
-    :func:`choose_decomposition` and logs why."""
+    :func:`choose_decomposition`. Rank 0 logs which one runs, and why."""
     name = case["parallel"].get("decomposition", "auto")
+    why = "parallel.decomposition"
     if name == "auto" and case["parallel"].get("grid"):
-        name = "blocks"  # the case chose their grid
-    if name == "auto":
-        name, why = choose_decomposition(comm.size, case)
-        if comm.rank == 0:
-            log.info("decomposition: %s (auto: %s)", name, why)
-    return decomposition_class(name)(comm, case)
+        name, why = "blocks", "auto: parallel.grid is set"
+    elif name == "auto":
+        name, reason = choose_decomposition(comm.size, case)
+        why = f"auto: {reason}"
+    decomposition = decomposition_class(name)(comm, case)
+    if comm.rank == 0:
+        log.info("decomposition: %s, %s (%s)", name, decomposition.describe(), why)
+    return decomposition
 
 
 # Blocks exchange with up to 3^d - 1 neighbours where slabs talk to two: they are
