@@ -106,10 +106,11 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
 
 @pytest.mark.mpi
 def test_more_ranks_than_the_domain_holds_exits_2(tmp_path):
-    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab.
+    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab ("auto" would take
+    # a 1 x 2 grid of blocks).
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
-                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0"],
-                        ranks=2, timeout=60)
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=slabs"], ranks=2, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
@@ -123,7 +124,8 @@ def test_slabs_thinner_than_the_halo_exit_2(tmp_path):
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
                          "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
                          "--set", "domain.lower=[-1.0, -0.1]",
-                         "--set", "domain.upper=[1.26, 0.4]"], ranks=3, timeout=60)
+                         "--set", "domain.upper=[1.26, 0.4]",
+                         "--set", "parallel.decomposition=slabs"], ranks=3, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
