@@ -82,7 +82,7 @@ def log_slope(x, y):
 
 def gravity(case):
     """|g| [m/s^2] of a case."""
-    return float(np.hypot(*case["physics"]["gravity"]))
+    return float(np.linalg.norm(case["physics"]["gravity"]))
 
 
 def fluid_extent(case):
@@ -175,7 +175,8 @@ def hydrostatic_pressure_error(path, case, settle_time):
       the first frame, minus 1 (positive: the column has expanded).
     """
     lower, upper = fluid_extent(case)
-    surface, depth = upper[1], upper[1] - lower[1]
+    # The vertical is the last axis (y in 2D, z in 3D).
+    surface, depth = upper[-1], upper[-1] - lower[-1]
     spacing = case["particles"]["spacing"]
     density, g = case["fluid"]["density"], gravity(case)
     all_frames = read_frames(path)
@@ -184,7 +185,7 @@ def hydrostatic_pressure_error(path, case, settle_time):
         raise ValueError(f"no frame after t = {settle_time}")
     first = all_frames[0]
     fluid = first["kind"] == FLUID
-    y0 = first["position"][:, 1]
+    y0 = first["position"][:, -1]
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
     interior = fluid & (y0 < surface - spacing)
     scale = density * g * depth
@@ -207,10 +208,10 @@ def hydrostatic_pressure_error(path, case, settle_time):
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
     speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
-    floor = lower[1]
+    floor = lower[-1]
 
     def column_height(frame):
-        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, 1] - floor))
+        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, -1] - floor))
 
     height = np.mean([column_height(f) for f in selected]) / column_height(first) - 1.0
     return {"bottom": float(mean_error[bottom].mean()),
