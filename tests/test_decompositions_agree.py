@@ -9,7 +9,8 @@ tolerance. The blocks' grids are set to 1 x 2, 1 x 3 and 2 x 2 (they cut y,
 and on four ranks across corners), so the ghosts they exchange are not the
 slabs'. The open boundaries ask the decomposition who owns each entering
 particle: the box in a channel flow with an inlet and an outlet is checked the
-same way on a 2 x 2 grid of blocks.
+same way on a 2 x 2 grid of blocks, and the 3D dam break on grids that cut y
+and z.
 """
 
 import h5py
@@ -49,13 +50,15 @@ class Runs:
         self.directory, self.case, self.arguments = directory, case, arguments
         self.frames = {}
 
-    def __call__(self, ranks, decomposition):
-        key = (ranks, decomposition)
+    def __call__(self, ranks, decomposition, grid=None):
+        """The last frame of the run; blocks on ``grid`` (GRIDS[ranks] by default)."""
+        grid = (grid or GRIDS[ranks]) if decomposition == "blocks" else None
+        key = (ranks, decomposition, grid)
         if key not in self.frames:
-            out = self.directory / f"{decomposition}{ranks}"
+            out = self.directory / f"{decomposition}{ranks}-{len(self.frames)}"
             chosen = ["--set", f"parallel.decomposition={decomposition}"]
-            if decomposition == "blocks":
-                chosen += ["--set", f"parallel.grid={GRIDS[ranks]}"]
+            if grid is not None:
+                chosen += ["--set", f"parallel.grid={grid}"]
             result = run_parmps([CASES / self.case, "-o", out] + chosen + self.arguments,
                                 ranks=ranks, timeout=300)
             assert result.returncode == 0, result.stderr[-3000:]
@@ -98,3 +101,20 @@ def test_blocks_with_open_boundaries_match_one_rank(tmp_path):
     # removes fluid; every rank keeps the entering particles the decomposition gives it.
     runs = Runs(tmp_path, "box_in_flow.toml", ["--end-time", "0.12"] + TIGHT)
     _assert_same(runs(4, "blocks"), runs(1, "slabs"))
+
+
+# The 3D dam break (SPHERIC Test 2) at l0 = 11 cm, 25 steps of 2 ms, as tests/test_3d.py.
+DAM_BREAK_3D = ["--set", "particles.spacing=0.11", "--set", "time.fixed_dt=0.002",
+                "--end-time", "0.05", "--set", "time.output_interval=0.05"] + TIGHT
+
+
+@pytest.fixture(scope="module")
+def dam_break_3d(tmp_path_factory):
+    return Runs(tmp_path_factory.mktemp("agree3d"), "dam_break_3d.toml", DAM_BREAK_3D)
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks, grid", [(2, "[1, 1, 2]"), (4, "[2, 1, 2]"), (4, "[1, 2, 2]")])
+def test_3d_blocks_match_one_rank(dam_break_3d, ranks, grid):
+    # Cuts along z and y as well as x, with ghosts across the blocks' edges in 3D.
+    _assert_same(dam_break_3d(ranks, "blocks", grid), dam_break_3d(1, "slabs"))
