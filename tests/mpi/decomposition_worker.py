@@ -9,7 +9,7 @@ RESULT.json. An unexpected exception aborts the whole job. ``abort`` raises on
 the last rank while the others wait in a barrier: the job must end, not hang.
 
 Most checks run once per set-up (``SETUPS``: slabs in 2D, blocks in 2D, blocks
-in 3D on synthetic positions, before any 3D case exists) and know a
+in 3D on synthetic positions) and know a
 decomposition only through its interface: ``owner``, ``box``, ``neighbours``.
 Their brute-force answers come from the global scene, which every rank holds.
 
@@ -39,24 +39,17 @@ SETUPS = {"slabs": ("slabs", 2, 10.0), "blocks": ("blocks", 2, 30.0),
 
 
 def make_case(lower_x, upper_x, setup="slabs", **parallel):
-    """A case with the default halo; strict migration (no margin) unless asked.
-
-    A 3D case is validated as 2D (cases are 2D for now) and given 3D bounds after:
-    the decompositions read only the spacing, the halo settings and the domain.
-    """
+    """A case with the default halo; strict migration (no margin) unless asked."""
     name, dimension, across = SETUPS[setup]
     parallel.setdefault("migration_margin", 0.0)
     parallel["decomposition"] = name
-    case = schema.validate({
-        "domain": {"lower": [lower_x, 0.0], "upper": [upper_x, across]},
+    return schema.validate({
+        "domain": {"lower": [lower_x] + [0.0] * (dimension - 1),
+                   "upper": [upper_x] + [across] * (dimension - 1)},
         "particles": {"spacing": SPACING},
         "time": {"end": 1.0},
         "parallel": parallel,
     })
-    case["domain"]["lower"] = [lower_x] + [0.0] * (dimension - 1)
-    case["domain"]["upper"] = [upper_x] + [across] * (dimension - 1)
-    case["dimension"] = dimension
-    return case
 
 
 def build_decomposition(comm, case):
