@@ -59,6 +59,27 @@ def test_mpi(mpi_results, name):
     assert mpi_results[name] is None, mpi_results[name]
 
 
+# On eight ranks the blocks are a 2 x 2 x 2 grid in 3D and 4 x 2 in 2D: every kind of
+# neighbour (faces, edges, corners) and three levels of nested cuts. (The slabs' scenes hold
+# at most six slabs, and some 2D scenes are sized for four ranks.)
+EIGHT_RANK_CHECKS = [f"blocks3d:{name}" for name in ("halo", "refresh", "migrate",
+                                                     "lazy_migration", "rebalance_projection",
+                                                     "empty_rank")] \
+    + [f"blocks:{name}" for name in ("halo", "refresh", "migrate", "lazy_migration")]
+
+
+@pytest.mark.mpi
+def test_blocks_on_eight_ranks(tmp_path):
+    out = tmp_path / "results.json"
+    result = run_mpirun(8, [sys.executable, WORKER, "checks", out] + EIGHT_RANK_CHECKS,
+                        timeout=120)
+    assert result.returncode == 0 and out.exists(), result.stderr[-3000:]
+    results = json.loads(out.read_text())
+    assert sorted(results) == sorted(EIGHT_RANK_CHECKS)
+    failed = {name: message for name, message in results.items() if message}
+    assert not failed, failed
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_exception_on_one_rank_aborts_the_job(ranks):
