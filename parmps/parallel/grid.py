@@ -41,7 +41,9 @@ def ghost_ratio(dims, lower, upper, width):
     dims = np.asarray(dims, np.float64)
     side = extent / dims
     grown = side + width * 2.0 * (dims - 1.0) / dims
-    return float(np.prod(grown / side) - 1.0)
+    # An uncut axis grows by nothing, even when the extent along it is nil (a flat scene).
+    factor = np.divide(grown, side, out=np.ones_like(side), where=dims > 1)
+    return float(np.prod(factor) - 1.0)
 
 
 def choose_grid(ranks, lower, upper, min_width, width):
