@@ -9,8 +9,9 @@ SECTIONS = {
         "decomposition": Key("str", "auto", choices=CHOICES,
                              doc="how the domain is cut over the ranks (parmps.parallel."
                                  "DECOMPOSITIONS): slabs along x, blocks of a px x py (x pz) "
-                                 "rank grid, or auto: slabs while the grid with the fewest "
-                                 "ghosts for the domain cuts along x alone, else blocks"),
+                                 "rank grid, or auto: slabs unless they do not fit the halo or "
+                                 "a grid cutting two or more axes models a quarter fewer "
+                                 "ghosts (rank 0 logs the choice and why)"),
         "grid": Key("ints", [], gt=0,
                     doc="blocks: the rank grid [px, py] ([px, py, pz] in 3D), whose product "
                         "is the rank count; empty: the grid with the fewest ghosts for the "
