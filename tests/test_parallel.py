@@ -6,7 +6,8 @@
   of validation/hydrostatic, like one rank.
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
-- A decomposition that cannot work is refused with exit status 2 and one line.
+- A decomposition that cannot work (slabs or blocks) is refused with exit status 2 and
+  one line.
 - An exception on one rank ends the whole job within seconds, never a hang.
 """
 
@@ -105,10 +106,11 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
 
 @pytest.mark.mpi
 def test_more_ranks_than_the_domain_holds_exits_2(tmp_path):
-    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab.
+    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab ("auto" would take
+    # a 1 x 2 grid of blocks).
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
-                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0"],
-                        ranks=2, timeout=60)
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=slabs"], ranks=2, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
@@ -122,11 +124,31 @@ def test_slabs_thinner_than_the_halo_exit_2(tmp_path):
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
                          "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
                          "--set", "domain.lower=[-1.0, -0.1]",
-                         "--set", "domain.upper=[1.26, 0.4]"], ranks=3, timeout=60)
+                         "--set", "domain.upper=[1.26, 0.4]",
+                         "--set", "parallel.decomposition=slabs"], ranks=3, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
     assert "thinner than the halo" in lines[0] and "rank 1" in lines[0]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("grid, words", [
+    ([], "no grid of 3 ranks fits"),
+    ([3, 1], "cuts x into 3 blocks"),
+    ([2, 2], "product must be the rank count"),
+])
+def test_blocks_too_fine_for_the_halo_exit_2(tmp_path, grid, words):
+    # The 0.162 m halo in the 0.32 x 0.42 m tank leaves room for one block along x and two
+    # along y: no grid of 3 ranks.
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=blocks",
+                         "--set", f"parallel.grid={grid}"], ranks=3, timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1, result.stderr
+    assert words in lines[0], lines[0]
 
 
 @pytest.mark.mpi

@@ -93,6 +93,28 @@ def test_restart_on_another_rank_count_follows_the_uninterrupted_run(scene, tmp_
     assert text.count('<Grid Name="step ') == len(steps)
 
 
+@pytest.mark.mpi
+def test_a_checkpoint_written_on_slabs_continues_on_blocks(tmp_path):
+    """parallel.decomposition = "auto" runs the dam break's tank as slabs on 2 ranks and as
+    a 2 x 2 grid of blocks on 4 (their modelled ghosts: 23 % and 14 %): the checkpoint of
+    the slabs continues on the blocks and follows the uninterrupted run to 1e-9 of the
+    domain's size, particle by particle."""
+    case = str(CASES / "dam_break.toml")
+    extra = ["--set", "particles.spacing=0.01", "--set", "time.fixed_dt=0.001",
+             "--set", "time.output_interval=0.01"]
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    _run([case, "-o", whole, "--end-time", "0.04"] + extra, 2)
+    first = _run([case, "-o", split, "--end-time", "0.02"] + extra, 2)
+    assert "decomposition: slabs" in first.stderr
+    second = _run(["--restart", split, "--end-time", "0.04"], 4)
+    assert "decomposition: blocks, 2 x 2 blocks" in second.stderr
+    last, reference = read_frame(split / "result.h5"), read_frame(whole / "result.h5")
+    assert last["step"] == reference["step"] == 40
+    np.testing.assert_array_equal(last["id"], reference["id"])
+    difference = np.abs(last["position"] - reference["position"]).max()
+    assert difference < 1e-9 * _domain_size("dam_break.toml"), difference
+
+
 def test_solid_only_restart_and_refusals(tmp_path):
     """A solid-only run continues exactly; a different case file, -o elsewhere and a
     directory without a checkpoint are refused in one line (exit 2)."""

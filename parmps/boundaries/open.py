@@ -272,7 +272,7 @@ class OpenBoundaries(Participant):
             columns = inlet.new_columns(time)
             if len(columns):
                 entering = inlet.particles(columns, time)
-                keep = np.flatnonzero(owner(entering.position[:, 0]) == comm.rank)
+                keep = np.flatnonzero(owner(entering.position) == comm.rank)
                 parts.append(entering.select(keep))
         result = Particles.concatenate(parts) if len(parts) > 1 else parts[0]
         counts = np.array([converted, removed], np.int64)

@@ -103,7 +103,7 @@ def write_by_id(group, particles, fields, comm):
     contiguous block at the offset of an exclusive scan.
     """
     # Here, not at the top: reading frames back must not start MPI.
-    from parmps.parallel.slabs import by_id_blocks
+    from parmps.parallel.exchange import by_id_blocks
     owned, offset, total = by_id_blocks(particles, comm)
     count = owned.n_owned
     for name in fields:

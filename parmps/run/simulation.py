@@ -75,9 +75,9 @@ class Simulation:
     def _set_up_fluid(self):
         from parmps.core import scene
         from parmps.fluid.projection import FluidSolver
-        from parmps.parallel.slabs import SlabDecomposition
+        from parmps.parallel import create_decomposition
         case, comm = self.case, self.comm
-        self.decomposition = SlabDecomposition(comm, case)
+        self.decomposition = create_decomposition(comm, case)
         open_boundaries = None
         if case["inlet"] or case["outlet"]:
             from parmps.boundaries.open import OpenBoundaries
