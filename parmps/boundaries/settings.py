@@ -24,16 +24,20 @@ SECTIONS = {
     "tank": Section({
         "lower": Key("vec2", doc="inner lower-left corner (the wall surface)"),
         "upper": Key("vec2", doc="inner upper-right corner; the side walls end at its y"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
-        "dummy_layers": Key("int", 2, ge=0, le=10),
-        "open_top": Key("bool", True),
+        "wall_layers": Key("int", 2, ge=1, le=10, doc="layers of wall particles (in the PPE)"),
+        "dummy_layers": Key("int", 2, ge=0, le=10,
+                            doc="layers of dummy particles behind the walls (number density "
+                                "only)"),
+        "open_top": Key("bool", True, doc="no wall along the top (false: a closed box)"),
         **MOTION_KEYS,
     }, many=True, doc="walls around a rectangle, with dummy layers behind them; they may "
                       "translate at a constant velocity (see MOTION_KEYS)"),
     "wall_box": Section({
-        "lower": Key("vec2"),
-        "upper": Key("vec2"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
+        "lower": Key("vec2", doc="lower-left corner of the obstacle's surface [m]"),
+        "upper": Key("vec2", doc="upper-right corner of the obstacle's surface [m]"),
+        "wall_layers": Key("int", 2, ge=1, le=10,
+                           doc="layers of wall particles inside its surface (dummies fill "
+                               "the rest)"),
         **MOTION_KEYS,
     }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside; "
                       "it may translate at a constant velocity (see MOTION_KEYS)"),

@@ -31,9 +31,9 @@ SECTIONS = {
         "gravity": Key("vec2", [0.0, -9.81], doc="[m/s^2]"),
     }),
     "fluid_block": Section({
-        "lower": Key("vec2"),
-        "upper": Key("vec2"),
-        "velocity": Key("vec2", [0.0, 0.0]),
+        "lower": Key("vec2", doc="lower-left corner of the block [m]"),
+        "upper": Key("vec2", doc="upper-right corner of the block [m]"),
+        "velocity": Key("vec2", [0.0, 0.0], doc="initial velocity of its particles [m/s]"),
     }, many=True, doc="a rectangle filled with fluid particles on the l0 lattice"),
 }
 
