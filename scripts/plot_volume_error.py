@@ -20,7 +20,7 @@ import pathlib
 import subprocess
 import sys
 
-import h5py
+import parmps
 import matplotlib
 
 matplotlib.use("Agg")
@@ -50,19 +50,13 @@ def run_case(case, directory, in_process):
 
 
 def read_result(directory):
-    with h5py.File(directory / "result.h5", "r") as handle:
-        (name,) = list(handle["solids"])
-        solids = handle["solids"][name]
-        series = {key: solids[key][()] for key in ("time", "volume_error", "centroid")}
-        series["springs"] = solids["springs"][()]
-        frames = {}
-        for step in handle["frames"]:
-            group = handle["frames"][step]
-            frames[float(group.attrs["time"])] = group["solids"][name]["position"][()]
-        import tomllib
-        case = tomllib.loads(handle["case"].attrs["toml"])
-    series["frames"] = frames
-    series["load"] = case["body"][0]["load"][0]
+    with parmps.open_result(directory) as result:
+        (name,) = list(result.bodies)
+        body = result.bodies[name]
+        series = {key: body[key] for key in ("time", "volume_error", "centroid", "springs")}
+        series["frames"] = {frame.time: frame.bodies[name]["position"]
+                            for frame in result.frames}
+        series["load"] = result.case["body"][0]["load"][0]
     return series
 
 

@@ -41,7 +41,7 @@ def test_the_api_page_lists_the_public_modules(site):
     finally:
         sys.path.remove(str(DOCS))
     modules = conf.public_modules()
-    assert {"parmps.config", "parmps.schema", "parmps.validation",
+    assert {"parmps.config", "parmps.schema", "parmps.result", "parmps.validation",
             "parmps.fluid.ppe"} <= set(modules)
     text = (site / "_generated" / "api.html").read_text()
     missing = [name for name in modules if f'id="module-{name}"' not in text]
