@@ -97,6 +97,12 @@ def dam_break_time_scale(case):
     return math.sqrt(2.0 * gravity(case) / (upper[0] - lower[0]))
 
 
+def column_time_scale(case):
+    """sqrt(g / H) [1/s] of a water column H high: t* = t sqrt(g / H) (Lobovsky et al.)."""
+    lower, upper = fluid_extent(case)
+    return math.sqrt(gravity(case) / (upper[1] - lower[1]))
+
+
 # --------------------------------------------------------------------------
 # Dam break: the surge front against Martin & Moyce
 
@@ -453,7 +459,7 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
     lower, upper = fluid_extent(case)
     height = upper[1] - lower[1]
     g = gravity(case)
-    time_scale = math.sqrt(g / height)
+    time_scale = column_time_scale(case)
     pressure_scale = case["fluid"]["density"] * g * height
     out = {}
     for name, reference in references.items():
