@@ -17,7 +17,6 @@ Prints the measured numbers.
 
 import argparse
 import pathlib
-import subprocess
 import sys
 
 import parmps
@@ -45,8 +44,10 @@ def run_case(case, directory, in_process):
         Simulation(schema.validate(config.load_text(text)), text, MPI.COMM_WORLD,
                  str(directory)).execute()
         return
-    subprocess.run([sys.executable, "-m", "parmps", str(case), "-o", str(directory)],
-                   check=True, cwd=ROOT)
+    from parmps.validation import launch
+    record = launch.run(case, directory, timeout=None, root=ROOT, cwd=ROOT)
+    if record["status"] != 0:
+        sys.exit(f"{record['command']}: {record['outcome']}")
 
 
 def read_result(directory):

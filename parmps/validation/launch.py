@@ -39,6 +39,9 @@ def environment(spin=False):
     idle (timed benchmarks keep Open MPI's default, spinning)."""
     from parmps.parallel.mpi import launch_environment
     env = launch_environment()
+    # Containers often lack the kernel support of vader's single-copy transport (as
+    # scripts/setup says too): Open MPI then fails at the first large message.
+    env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
     if not spin:
         # Ranks that spin while waiting lose badly on a machine busier than its cores.
         env.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
@@ -100,14 +103,15 @@ def outcome(status, stderr, timeout):
     return f"exit {status} without a message: {tail}", message
 
 
-def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600, root=None):
-    """Run one case; returns a record: ``command`` (as shown), ``ranks``, ``status``,
-    ``elapsed``, ``result``, ``outcome``, ``message`` and the result's summary
-    (:func:`parmps.tools.analysis.run_summary`)."""
+def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600, root=None,
+        cwd=None):
+    """Run one case (from ``cwd``, which relative paths are read against); returns a record:
+    ``command`` (as shown), ``ranks``, ``status``, ``elapsed``, ``result``, ``outcome``,
+    ``message`` and the result's summary (:func:`parmps.tools.analysis.run_summary`)."""
     from parmps.tools import analysis
     argv = command(case, out, sets, end_time, petsc, ranks)
-    status, _, stderr, elapsed = execute(argv, timeout)
-    result = os.path.join(os.fspath(out), "result.h5")
+    status, _, stderr, elapsed = execute(argv, timeout, cwd=cwd)
+    result = os.path.join(os.fspath(cwd or ""), os.fspath(out), "result.h5")
     said, message = outcome(status, stderr, timeout)
     record = {"command": shown(argv, root), "ranks": ranks, "status": status,
               "elapsed": elapsed, "result": result, "outcome": said, "message": message}
