@@ -34,3 +34,15 @@ def test_the_readme_check_commands_run(line):
     assert words[:3] == ["python", "-m", "parmps"]
     result = run_parmps(words[3:], timeout=120)
     assert result.returncode == 0, result.stderr[-2000:]
+
+
+def test_the_first_case_runs_and_the_python_example_reads_it(tmp_path, monkeypatch):
+    (case,) = _blocks("toml")
+    (example,) = _blocks("python")
+    (tmp_path / "still.toml").write_text(case)
+    result = run_parmps([tmp_path / "still.toml", "-o", tmp_path / "out" / "still",
+                         "--end-time", "0.02", "--set", "time.output_interval=0.01"],
+                        timeout=180)
+    assert result.returncode == 0, result.stderr[-2000:]
+    monkeypatch.chdir(tmp_path)          # the example reads out/still, as the README says
+    exec(compile(example, "README.md", "exec"), {})
