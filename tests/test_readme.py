@@ -26,13 +26,25 @@ def test_the_first_case_is_valid(tmp_path):
     assert '"fluid"' in result.stdout
 
 
-@pytest.mark.parametrize("line", [line.split("#")[0].strip()
-                                  for block in _blocks("sh") for line in block.splitlines()
-                                  if "--check" in line])
-def test_the_readme_check_commands_run(line):
+def _short_commands():
+    """The README's python -m parmps lines that check a case or run it for less than 1 s."""
+    lines = [line.split("#")[0].strip() for block in _blocks("sh")
+             for line in block.splitlines() if line.startswith("python -m parmps")]
+    return [line for line in lines if "--check" in line or
+            ("--end-time" in line and float(line.split("--end-time")[1].split()[0]) < 1.0)]
+
+
+def test_the_readme_has_short_commands_to_run():
+    assert len(_short_commands()) >= 2
+
+
+@pytest.mark.parametrize("line", _short_commands())
+def test_the_readme_short_commands_run(line, tmp_path):
     words = line.split()
     assert words[:3] == ["python", "-m", "parmps"]
-    result = run_parmps(words[3:], timeout=120)
+    # A run writes into tmp_path rather than the checkout's out/.
+    extra = [] if "--check" in words else ["-o", tmp_path]
+    result = run_parmps(words[3:] + extra, timeout=300)
     assert result.returncode == 0, result.stderr[-2000:]
 
 
