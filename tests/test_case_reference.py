@@ -43,3 +43,4 @@ def test_units_are_read_from_the_doc_text_not_from_table_references():
     assert casedoc.unit(Key("float", 1.0, doc="radius, in l0")) == "l0"
     assert casedoc.unit(Key("str", "x", doc="settings in [mps.<name>]")) == ""
     assert casedoc.default(Key("vec2")) == "required"
+    assert casedoc.default(Key("float", None, doc="optional")) == "unset"
