@@ -96,3 +96,12 @@ def test_fields_are_sorted_by_id_and_read_only_when_asked(tmp_path):
 def test_a_missing_result_is_one_line(tmp_path):
     with pytest.raises(CaseError, match="no result file there"):
         parmps.open_result(tmp_path)
+
+
+def test_importing_the_package_loads_no_numpy():
+    # The command line sets BLAS to one thread per rank before NumPy loads OpenBLAS.
+    import subprocess
+    import sys
+    code = "import sys, parmps, parmps.cli; assert 'numpy' not in sys.modules, 'numpy loaded'"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
