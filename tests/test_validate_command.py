@@ -42,6 +42,8 @@ def test_a_validation_runs_measures_and_passes(tmp_path):
     verdict = record["verdicts"]["volume_error"]
     assert verdict["tolerance"] == validation.load("mass_spring_7x7").tolerance["volume_error"]
     assert 0 < verdict["value"] < verdict["tolerance"]
+    # The second case's bound is the tests' to judge, and the record says so.
+    assert record["not_judged"] == ["unconstrained_volume_error"]
     # The same result measured again, without a run.
     again = run_parmps(["validate", "mass_spring_7x7", "--result",
                         tmp_path / "mass_spring_7x7"], timeout=120)

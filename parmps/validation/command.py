@@ -84,6 +84,14 @@ def measure(check, path):
     return scalars(measured), check.verdicts(measured), ""
 
 
+def not_judged(check, verdicts):
+    """The tolerances no verdict applied: those the tests judge from the run itself (a
+    sub-table, a second case's, a figure the metric does not return)."""
+    names = [check.judge.get(key, key) for key in check.tolerance if key != "judged"]
+    return sorted(key for key, name in zip([k for k in check.tolerance if k != "judged"], names)
+                  if not any(v == name or v.endswith(f".{name}_error") for v in verdicts))
+
+
 def validate_one(check, args):
     """Run (or read) one validation; returns its JSON record."""
     from parmps import validation
@@ -106,7 +114,8 @@ def validate_one(check, args):
             record["passed"] = False
             return record
     figures, verdicts, error = measure(check, path)
-    record.update(result=path, measured=figures, verdicts=verdicts)
+    record.update(result=path, measured=figures, verdicts=verdicts,
+                  not_judged=not_judged(check, verdicts))
     if error:
         record["error"] = error
     record["passed"] = (not error and record.get("outcome", "ran to the end") == "ran to the end"
