@@ -35,6 +35,10 @@ SCENES = {
                       0.1, 0.2, 1, 2),
     "dam_break": ("dam_break.toml", ["--set", "particles.spacing=0.01",
                                      "--set", "time.output_interval=0.025"], 0.05, 0.1, 2, 1),
+    # SPHERIC's 3D dam break at 0.55/5 m (about 5k particles), 2 ranks, then 3.
+    "dam_break_3d": ("dam_break_3d.toml", ["--set", "particles.spacing=0.11",
+                                           "--set", "time.output_interval=0.02"],
+                     0.03, 0.06, 2, 3),
 }
 
 

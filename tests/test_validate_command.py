@@ -80,3 +80,14 @@ def test_verdicts_bound_the_absolute_value_a_range_and_each_judged_probe():
     verdicts = lobovsky.verdicts(rows)
     assert verdicts["P2.arrival_error"]["pass"] and not verdicts["P3.mean_error"]["pass"]
     assert len(verdicts) == 6
+
+
+def test_a_judge_table_reaches_into_a_nested_metric():
+    spheric = validation.load("dam_break_3d")
+    row = {"arrival_error": 0.01, "means": [{"error": 0.05}, {"error": -0.2}]}
+    measured = {name: dict(row) for name in ("P1", "P2", "P3", "P4")}
+    measured.update({name: {"means": [{"error": 0.3}]} for name in ("P5", "P6", "P7", "P8")})
+    verdicts = spheric.verdicts(measured)
+    assert len(verdicts) == 16
+    assert verdicts["P1.arrival_error"]["pass"] and verdicts["P2.means.0.error"]["pass"]
+    assert not verdicts["P3.means.1.error"]["pass"] and not verdicts["P8.means.0.error"]["pass"]

@@ -3,6 +3,7 @@
 import math
 
 from parmps.config import Key, Section
+from parmps.errors import CaseError
 
 SECTIONS = {
     "solid": Section({
@@ -88,6 +89,13 @@ SECTIONS = {
         }, doc="[[body.load]]: a force on a node set over a time window"),
     }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
 }
+
+
+def check_dimension_support(raw, dimension):
+    """Bodies are 2D so far: a 3D case with a [[body]] is refused in one line."""
+    if dimension != 2 and raw.get("body"):
+        raise CaseError(f"[[body]]: solid bodies run in 2D cases only so far; this case is "
+                        f"{dimension}D (domain.lower has {dimension} components)")
 
 
 def check(case):

@@ -78,7 +78,7 @@ def log_slope(x, y):
 
 def gravity(case):
     """|g| [m/s^2] of a case."""
-    return float(np.hypot(*case["physics"]["gravity"]))
+    return float(np.linalg.norm(case["physics"]["gravity"]))
 
 
 def fluid_extent(case):
@@ -188,7 +188,8 @@ def hydrostatic_pressure_error(path, case, settle_time):
       the first frame, minus 1 (positive: the column has expanded).
     """
     lower, upper = fluid_extent(case)
-    surface, depth = upper[1], upper[1] - lower[1]
+    # The vertical is the last axis (y in 2D, z in 3D).
+    surface, depth = upper[-1], upper[-1] - lower[-1]
     spacing = case["particles"]["spacing"]
     density, g = case["fluid"]["density"], gravity(case)
     all_frames = read_frames(path)
@@ -197,7 +198,7 @@ def hydrostatic_pressure_error(path, case, settle_time):
         raise ValueError(f"no frame after t = {settle_time}")
     first = all_frames[0]
     fluid = first["kind"] == FLUID
-    y0 = first["position"][:, 1]
+    y0 = first["position"][:, -1]
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
     interior = fluid & (y0 < surface - spacing)
     scale = density * g * depth
@@ -220,10 +221,10 @@ def hydrostatic_pressure_error(path, case, settle_time):
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
     speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
-    floor = lower[1]
+    floor = lower[-1]
 
     def column_height(frame):
-        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, 1] - floor))
+        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, -1] - floor))
 
     height = np.mean([column_height(f) for f in selected]) / column_height(first) - 1.0
     return {"bottom": float(mean_error[bottom].mean()),
@@ -480,5 +481,45 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
                "nan_fraction": float(np.mean(~np.isfinite(p)))}
         row["arrival_error"] = row["arrival"] - row["arrival_measured"]
         row["mean_error"] = row["mean"] / row["mean_measured"] - 1.0
+        out[name] = row
+    return out
+
+
+def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=500.0,
+                            peak_width=0.01, peak_until=None, arrival_sensors=()):
+    """Pressure probes against a record of the same sensors in SI units (SPHERIC Test 2).
+
+    ``reference``: a CSV whose first column is the time [s] and whose others are named
+    after the probes (gauge pressure [Pa]). ``windows``: probe name -> list of
+    ``[start, end]`` [s] over which the time-averaged pressure is compared. Per probe:
+    ``arrival`` (the first time above ``arrival_threshold`` [Pa]) for ``arrival_sensors``,
+    ``means`` (simulated, measured, relative difference per window) and ``peak``: the
+    largest ``peak_width``-second running mean up to ``peak_until`` (default the run's
+    end), with its time, beside the record's.
+    """
+    table = reference_table(reference)
+    te = list(table.values())[0]
+    out = {}
+    for name, spans in windows.items():
+        t, p = read_probe(path, name)
+        pe = table[name]
+        until = t[-1] if peak_until is None else peak_until
+        smooth, smooth_e = running_mean(t, p, peak_width), running_mean(te, pe, peak_width)
+        k = int(np.argmax(np.where(t <= until, smooth, -np.inf)))
+        ke = int(np.argmax(np.where(te <= until, smooth_e, -np.inf)))
+        row = {"peak": float(smooth[k]), "peak_time": float(t[k]),
+               "peak_measured": float(smooth_e[ke]), "peak_time_measured": float(te[ke]),
+               "nan_fraction": float(np.mean(~np.isfinite(p))), "means": []}
+        for start, end in spans:
+            # Dry samples carry no load on a wall: a NaN reading counts as 0 Pa.
+            mean = window_mean(t, np.nan_to_num(p, nan=0.0), start, end)
+            measured = window_mean(te, pe, start, end)
+            row["means"].append({"window": [start, end], "mean": mean,
+                                 "mean_measured": measured,
+                                 "error": mean / measured - 1.0})
+        if name in arrival_sensors:
+            row["arrival"] = first_crossing(t, p, arrival_threshold)
+            row["arrival_measured"] = first_crossing(te, pe, arrival_threshold)
+            row["arrival_error"] = row["arrival"] - row["arrival_measured"]
         out[name] = row
     return out

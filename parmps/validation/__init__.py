@@ -106,8 +106,9 @@ class Validation:
     def verdicts(self, measured):
         """Each tolerance applied to what :meth:`measure` returned: name -> {value, tolerance,
         pass}. A number bounds the absolute value, a pair [low, high] the value itself.
-        ``[judge]`` maps a tolerance to the metric's name for it when they differ; with
-        ``judged`` (a list of probes), each tolerance applies to every probe's
+        ``[judge]`` maps a tolerance to the metric's name for it when they differ, or to a
+        list of paths into a nested result (``"P1.means.0.error"``: keys, and indexes of
+        lists); with ``judged`` (a list of probes), each tolerance applies to every probe's
         ``<name>_error``. Tolerances the metric does not measure (the tests judge those
         from the run) are left out."""
         verdicts = {}
@@ -115,7 +116,12 @@ class Validation:
             if key == "judged" or isinstance(bound, dict):
                 continue
             name = self.judge.get(key, key)
-            if "judged" in self.tolerance:
+            if isinstance(name, list):
+                for path in name:
+                    value = _lookup(measured, path)
+                    if isinstance(value, (int, float)):
+                        verdicts[path] = _verdict(value, bound)
+            elif "judged" in self.tolerance:
                 for probe in self.tolerance["judged"]:
                     value = measured.get(probe, {}).get(f"{name}_error")
                     if value is not None:
@@ -138,6 +144,19 @@ class Validation:
         for assignment in overrides:
             config.apply_override(raw, assignment)
         return schema.validate(raw)
+
+
+def _lookup(measured, path):
+    """The item at a dotted path of a nested result (keys, and indexes of lists), or None."""
+    node = measured
+    for part in path.split("."):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            return None
+    return node
 
 
 def _verdict(value, bound):

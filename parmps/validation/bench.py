@@ -15,6 +15,14 @@ max_rss_mb, the peak resident memory summed over the ranks.
 ``--set`` applies case overrides as parmps does (a pressure scheme, say).
 Runs with more ranks than cores oversubscribe, which the line records.
 
+``--scene dam_break_3d`` does the same with SPHERIC's 3D dam break
+(cases/dam_break_3d.toml, its tank as it is, probes left out) and adds
+``bytes_per_particle`` (max_rss over particles); with ``--time-to-solution`` it
+runs that case at 0.55/20 m (``--spacing``) to t = 0.5 s on 1 and 2 ranks against
+``TIME_TO_SOLUTION_TARGETS_3D``: half of DualSPHysics 5.4's CPU build on the same
+scene, spacing and cores, measured on one of these 2-core machines (846 s on 1 core,
+423 s on 2; 48,622 particles, 2,563 steps).
+
 ``--time-to-solution`` runs cases/dam_break_2d_peer.toml (the 2D dam break of
 MPS-Basic's and DualSPHysics's examples) as a user would, ``python -m parmps``
 under mpirun, to t = 0.5 s (``--end-time``) at each spacing (5 mm and 2.5 mm by
@@ -52,6 +60,10 @@ from parmps.validation import ROOT
 
 CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 PEER_CASE = os.path.join(ROOT, "cases", "dam_break_2d_peer.toml")
+SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_break_3d.toml")}
+# The 3D time to solution: 0.55/20 m to t = 0.5 s, half of DualSPHysics's seconds.
+SPACINGS_3D = (0.0275,)
+TIME_TO_SOLUTION_TARGETS_3D = {(0.0275, 1): 423.0, (0.0275, 2): 211.5}
 PEER_SPACINGS = (0.005, 0.0025)
 # Fluid within this height of the floor counts for the front (spray above it does not).
 FLOOR_BAND = 0.02
@@ -66,11 +78,13 @@ TIME_TO_SOLUTION_TARGETS = {(0.005, 1): 41.0, (0.005, 2): 28.5,
 TARGET_END_TIME = 0.5
 
 
-def spacing_for(target):
+def spacing_for(target, scene_name="dam_break"):
     """The l0 = a/m (a the case's column width) whose dam-break scene holds closest to
     ``target`` particles."""
     from parmps.core import scene
     from parmps.tools import analysis
+    if scene_name != "dam_break":
+        return _spacing_3d(target, scene_name)
     lower, upper = analysis.fluid_extent(_case(None))
     width, height = upper - lower
     # The fluid alone is m x (height/width) m particles; the walls add a few percent,
@@ -86,14 +100,33 @@ def spacing_for(target):
     return best
 
 
-def _case(spacing, steps=0, overrides=()):
+def _spacing_3d(target, scene_name):
+    """The spacing whose 3D scene holds about ``target`` particles: the count goes as
+    l0^-3, corrected by building the scene twice."""
+    from parmps.core import scene
+    spacing = _case(None, scene_name=scene_name)["particles"]["spacing"]
+    total = None
+    for _ in range(3):
+        total = len(scene.build(_case(spacing, scene_name=scene_name))[0])
+        if abs(total - target) < 0.02 * target:
+            break
+        spacing *= (total / target) ** (1.0 / 3.0)
+    return spacing, total
+
+
+def _case(spacing, steps=0, overrides=(), scene_name="dam_break"):
     from parmps import config, schema
-    with open(CASE, "rb") as handle:
+    with open(SCENES[scene_name], "rb") as handle:
         raw = config.load_text(handle.read().decode())
     for assignment in overrides:
         config.apply_override(raw, assignment)
     if spacing is not None:
         raw["particles"]["spacing"] = spacing
+    if scene_name != "dam_break":
+        raw["probe"] = []
+        raw["time"]["max_steps"] = steps
+        raw.setdefault("output", {})["frames"] = False
+        return schema.validate(raw)
     # A tank twice as tall as the column, as the run-up needs for 25 steps, keeps the
     # count mostly fluid (the case's taller walls are for the splash at t > 0.4 s).
     tank, domain = raw["tank"][0], raw["domain"]
@@ -116,7 +149,8 @@ def worker(args):
     from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
     spacing = args.spacing[0]
-    case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides)
+    case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides,
+                 scene_name=args.scene)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
     run = Simulation(case, "", comm, directory)
     timers = run.fluid.timers
@@ -149,6 +183,7 @@ def worker(args):
             "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
             "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
             "max_rss_mb": round(memory, 1),
+            "bytes_per_particle": round(memory * 2 ** 20 / particles),
             "spacing": spacing,
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
@@ -159,24 +194,26 @@ def worker(args):
         shutil.rmtree(directory, ignore_errors=True)
 
 
-def time_to_solution(spacing, ranks, end_time, overrides):
-    """One run of the peer dam break to ``end_time``; returns its JSON line as a dict."""
+def time_to_solution(spacing, ranks, end_time, overrides, scene_name="dam_break"):
+    """One run of the peer dam break (or of ``scene_name``'s 3D case) to ``end_time``;
+    returns its JSON line as a dict."""
     import shutil
 
-    from parmps import open_result, validation
+    from parmps import open_result
     from parmps.tools import analysis
     from parmps.validation import launch
     out = tempfile.mkdtemp(prefix="parmps-tts-")
     try:
+        case_file = PEER_CASE if scene_name == "dam_break" else SCENES[scene_name]
         sets = [f"particles.spacing={spacing!r}"] + list(overrides)
-        command = launch.command(PEER_CASE, out, sets, petsc=(), ranks=ranks)
+        command = launch.command(case_file, out, sets, petsc=(), ranks=ranks)
         # Exactly the end time asked for (the launcher's own formatting rounds to 6 digits).
         command += ["--end-time", repr(end_time)]
         load = os.getloadavg()[0]
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         status, _, stderr, _ = launch.execute(command, timeout=None, cwd=ROOT, spin=True)
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
-        line = {"case": os.path.relpath(PEER_CASE, ROOT), "spacing": spacing, "ranks": ranks,
+        line = {"case": os.path.relpath(case_file, ROOT), "spacing": spacing, "ranks": ranks,
                 "end_time": end_time, "load": round(load, 2)}
         if status != 0:
             return dict(line, error=stderr.strip().splitlines()[-3:])
@@ -189,25 +226,22 @@ def time_to_solution(spacing, ranks, end_time, overrides):
             case = result.case
             last = result.frames[-1]
             particles = len(last)
-            tank = case["tank"][0]
-            front = analysis.front(last, tank["lower"][0], spacing, floor=tank["lower"][1],
-                                   band=FLOOR_BAND)
+            if scene_name == "dam_break":
+                tank = case["tank"][0]
+                line["front_m"] = round(analysis.front(
+                    last, tank["lower"][0], spacing, floor=tank["lower"][1], band=FLOOR_BAND), 4)
         line.update({
             "particles": particles, "wall_seconds": round(seconds, 3), "steps": steps,
             "us_per_particle_step": round(1e6 * seconds / (particles * steps), 3),
             "ksp_iterations": iterations,
             "cpu_seconds": round(after.ru_utime + after.ru_stime
                                  - before.ru_utime - before.ru_stime, 1),
-            "front_m": round(front, 4),
             "oversubscribed": ranks > (os.cpu_count() or 1)})
-        dam_break = validation.load("dam_break")
-        if end_time * analysis.dam_break_time_scale(case) >= FRONT_COMPARE_UNTIL:
-            front = analysis.surge_front_error(
-                path, case, dam_break.reference, compare_until=FRONT_COMPARE_UNTIL,
-                delay_range=dam_break.metric["delay_range"],
-                delay_step=dam_break.metric["delay_step"])
-            line["front_rms"] = round(front["rms"], 4)
-        target = TIME_TO_SOLUTION_TARGETS.get((spacing, ranks))
+        targets = TIME_TO_SOLUTION_TARGETS_3D
+        if scene_name == "dam_break":
+            line.update(_front_rms(path, case, end_time))
+            targets = TIME_TO_SOLUTION_TARGETS
+        target = targets.get((spacing, ranks))
         if target is not None and end_time == TARGET_END_TIME:
             line["target_seconds"] = target
             line["within_target"] = seconds <= target
@@ -216,6 +250,20 @@ def time_to_solution(spacing, ranks, end_time, overrides):
         return line
     finally:
         shutil.rmtree(out, ignore_errors=True)
+
+
+def _front_rms(path, case, end_time):
+    """The surge front against Martin & Moyce (unshifted RMS) for a run that reaches
+    FRONT_COMPARE_UNTIL; nothing for a shorter one."""
+    from parmps import validation
+    from parmps.tools import analysis
+    if end_time * analysis.dam_break_time_scale(case) < FRONT_COMPARE_UNTIL:
+        return {}
+    dam_break = validation.load("dam_break")
+    front = analysis.surge_front_error(
+        path, case, dam_break.reference, compare_until=FRONT_COMPARE_UNTIL,
+        delay_range=dam_break.metric["delay_range"], delay_step=dam_break.metric["delay_step"])
+    return {"front_rms": round(front["rms"], 4)}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -239,6 +287,8 @@ def build_parser():
                         help="with --time-to-solution: l0 [m] (default 0.005 0.0025)")
     parser.add_argument("--end-time", type=float, default=0.5,
                         help="with --time-to-solution: simulated seconds (default 0.5)")
+    parser.add_argument("--scene", choices=tuple(SCENES), default="dam_break",
+                        help="dam_break (2D, the default) or dam_break_3d (SPHERIC Test 2)")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     return parser
 
@@ -251,9 +301,11 @@ def main(argv=None):
         return 0
     if args.time_to_solution:
         status = 0
-        for spacing in args.spacing or PEER_SPACINGS:
+        spacings = PEER_SPACINGS if args.scene == "dam_break" else SPACINGS_3D
+        for spacing in args.spacing or spacings:
             for ranks in args.ranks or [1, 2]:
-                line = time_to_solution(spacing, ranks, args.end_time, args.overrides)
+                line = time_to_solution(spacing, ranks, args.end_time, args.overrides,
+                                        args.scene)
                 status = status or int("error" in line)
                 print(json.dumps(line), flush=True)
         return status
@@ -266,10 +318,11 @@ def sizes(args):
     from parmps.validation import launch
     status = 0
     for target in args.particles:
-        spacing, _ = spacing_for(target)
+        spacing, _ = spacing_for(target, args.scene)
         for ranks in args.ranks or [1]:
             argv = [sys.executable, "-m", "parmps.validation.bench", "--worker", "--spacing",
-                    repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup)]
+                    repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup),
+                    "--scene", args.scene]
             argv += [word for override in args.overrides for word in ("--set", override)]
             command = mpirun_command(ranks, argv) if ranks > 1 else argv
             code, stdout, stderr, _ = launch.execute(command, timeout=None, cwd=ROOT, spin=True)

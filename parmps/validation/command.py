@@ -87,9 +87,14 @@ def measure(check, path):
 def not_judged(check, verdicts):
     """The tolerances no verdict applied: those the tests judge from the run itself (a
     sub-table, a second case's, a figure the metric does not return)."""
-    names = [check.judge.get(key, key) for key in check.tolerance if key != "judged"]
-    return sorted(key for key, name in zip([k for k in check.tolerance if k != "judged"], names)
-                  if not any(v == name or v.endswith(f".{name}_error") for v in verdicts))
+    left = []
+    for key in check.tolerance:
+        name = check.judge.get(key, key)
+        paths = name if isinstance(name, list) else [name]
+        if key != "judged" and not any(v in paths or v.endswith(f".{name}_error")
+                                       for v in verdicts for name in paths):
+            left.append(key)
+    return sorted(left)
 
 
 def validate_one(check, args):
@@ -118,8 +123,9 @@ def validate_one(check, args):
                   not_judged=not_judged(check, verdicts))
     if error:
         record["error"] = error
+    # Passed: the run ended, it was measured, and at least one verdict was given, all passing.
     record["passed"] = (not error and record.get("outcome", "ran to the end") == "ran to the end"
-                        and all(v["pass"] for v in verdicts.values()))
+                        and bool(verdicts) and all(v["pass"] for v in verdicts.values()))
     return record
 
 
