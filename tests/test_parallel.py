@@ -14,12 +14,11 @@
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps, run_python
-from parmps import validation
+from parmps import open_result, validation
 from parmps.tools import analysis
 
 HYDROSTATIC = validation.load("hydrostatic")
@@ -36,11 +35,9 @@ FIFTY_STEPS = COARSE + ["--set", "time.fixed_dt=0.001", "--end-time", "0.05",
 
 def _frame(path, step):
     """(id, position, pressure) of a frame, sorted by id."""
-    with h5py.File(path, "r") as handle:
-        group = handle["frames"][f"{step:08d}"]
-        ids = group["id"][()]
-        order = np.argsort(ids)
-        return ids[order], group["position"][()][order], group["pressure"][()][order]
+    with open_result(path) as run:
+        frame = run.frames.at_step(step)                 # sorted by id
+        return frame.id, frame.position, frame.pressure
 
 
 @pytest.fixture(scope="module")
@@ -95,9 +92,9 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
     result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--end-time", "0.35",
                          "--set", "output.frames=false"] + COARSE, ranks=3, timeout=240)
     assert result.returncode == 0, result.stderr
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        imbalance = handle["diagnostics"]["imbalance"][()]
-        time = handle["diagnostics"]["time"][()]
+    with open_result(tmp_path) as run:
+        imbalance = run.diagnostics["imbalance"]
+        time = run.diagnostics["time"]
     assert time[-1] == pytest.approx(0.35)
     worst = int(np.argmax(imbalance))
     assert imbalance.max() <= 1.10, f"imbalance {imbalance.max():.4f} at t = {time[worst]:.4f}"

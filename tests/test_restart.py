@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, mpi_environment, run_parmps
+from parmps import open_result
 from parmps.io.frames import read_frame, read_frames
 from parmps.parallel.mpi import launch_environment, mpirun_command
 
@@ -55,10 +56,9 @@ def _domain_size(case_file):
 
 
 def _series_steps(path):
-    with h5py.File(path, "r") as handle:
-        steps = handle["diagnostics/step"][()]
-        bodies = {name: handle[f"solids/{name}/time"][()] for name in handle.get("solids", {})}
-        return steps, bodies, bool(handle.attrs["complete"])
+    with open_result(path) as run:
+        bodies = {name: body.time for name, body in run.bodies.items()}
+        return run.diagnostics["step"], bodies, run.complete
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
@@ -188,8 +188,8 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     assert process.returncode != 0, text
     assert seconds < 30
     assert "--restart" in text and "interrupted" in text, text
-    with h5py.File(output / "result.h5", "r") as handle:
-        assert not handle.attrs["complete"]
+    with open_result(output) as run:
+        assert not run.complete
     frames = read_frames(output / "result.h5")
     assert frames and frames[0]["step"] == 0
     with h5py.File(output / "checkpoint.h5", "r") as handle:
@@ -199,9 +199,9 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     end = stopped + 0.02
     result = run_parmps(["--restart", output, "--end-time", end], ranks=2, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
-    with h5py.File(output / "result.h5", "r") as handle:
-        assert handle.attrs["complete"]
-        steps = handle["diagnostics/step"][()]
+    with open_result(output) as run:
+        assert run.complete
+        steps = run.diagnostics["step"]
     np.testing.assert_array_equal(steps, np.arange(1, len(steps) + 1))
     frames = read_frames(output / "result.h5")
     assert frames[-1]["time"] == pytest.approx(end)
@@ -221,8 +221,8 @@ def test_probes_go_on_after_a_restart_without_repeating_rows(tmp_path):
     assert result.returncode == 0, result.stderr
     rows = {}
     for name, out in (("whole", whole), ("split", split)):
-        with h5py.File(out / "result.h5", "r") as handle:
-            rows[name] = (handle["probes/bottom/time"][()], handle["probes/bottom/value"][()])
+        with open_result(out) as run:
+            rows[name] = (run.probes["bottom"].time, run.probes["bottom"].value)
         table = np.loadtxt(out / "probes" / "bottom.csv", delimiter=",", comments="#",
                            skiprows=2)
         np.testing.assert_array_equal(table[:, 0], rows[name][0])

@@ -25,17 +25,21 @@ SECTIONS = {
         "lower": Key("vector", doc="inner lower corner (the wall surface)"),
         "upper": Key("vector", doc="inner upper corner; the side walls end at its height "
                                    "(y in 2D, z in 3D)"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
-        "dummy_layers": Key("int", 2, ge=0, le=10),
-        "open_top": Key("bool", True),
+        "wall_layers": Key("int", 2, ge=1, le=10, doc="layers of wall particles (in the PPE)"),
+        "dummy_layers": Key("int", 2, ge=0, le=10,
+                            doc="layers of dummy particles behind the walls (number density "
+                                "only)"),
+        "open_top": Key("bool", True, doc="no wall along the top (false: a closed box)"),
         **MOTION_KEYS,
     }, many=True, doc="walls around a box (a floor and side walls; a roof unless open_top), "
                       "with dummy layers behind them; they may "
                       "translate at a constant velocity (see MOTION_KEYS)"),
     "wall_box": Section({
-        "lower": Key("vector"),
-        "upper": Key("vector"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
+        "lower": Key("vector", doc="lower corner of the obstacle's surface [m]"),
+        "upper": Key("vector", doc="upper corner of the obstacle's surface [m]"),
+        "wall_layers": Key("int", 2, ge=1, le=10,
+                           doc="layers of wall particles inside its surface (dummies fill "
+                               "the rest)"),
         **MOTION_KEYS,
     }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside; "
                       "it may translate at a constant velocity (see MOTION_KEYS)"),

@@ -39,9 +39,9 @@ SECTIONS = {
         "gravity": Key("vector", PerDimension(-9.81), doc="[m/s^2]"),
     }),
     "fluid_block": Section({
-        "lower": Key("vector"),
-        "upper": Key("vector"),
-        "velocity": Key("vector", ZERO),
+        "lower": Key("vector", doc="lower corner of the block [m]"),
+        "upper": Key("vector", doc="upper corner of the block [m]"),
+        "velocity": Key("vector", ZERO, doc="initial velocity of its particles [m/s]"),
     }, many=True, doc="a rectangle filled with fluid particles on the l0 lattice"),
 }
 
