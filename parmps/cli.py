@@ -1,6 +1,10 @@
 """Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--set S.K=V ...]
 [--check] [--debug] [PETSc options]``, or ``python -m parmps --restart OUTDIR [CASE.toml]
 [--end-time T]`` to continue a run from its checkpoint (docs/design.md §2.3, §5).
+Two commands come before a case: ``python -m parmps validate NAME|--all|--list``
+(:mod:`parmps.validation.command`) and ``python -m parmps bench``
+(:mod:`parmps.validation.bench`); a case file that happens to be named ``validate`` or
+``bench`` is still a case.
 
 Exit status 0 done, 2 bad input (one line on stderr), 1 a run that failed, 3 a run
 interrupted by a signal (its checkpoint written: ``--restart`` continues it).
@@ -60,7 +64,9 @@ class _Parser(argparse.ArgumentParser):
 def build_parser():
     parser = _Parser(prog="parmps", description="Parallel MPS fluid / mass-spring solid solver. "
                      "PETSc options such as -pressure_ksp_rtol 1e-10 pass through to the "
-                     "pressure solver.")
+                     "pressure solver.",
+                     epilog="Also: 'parmps validate NAME|--all|--list' runs the validations, "
+                            "'parmps bench' the benchmarks (each with --help).")
     parser.add_argument("case", nargs="?",
                         help="the case file (TOML); optional with --restart")
     parser.add_argument("--restart", metavar="OUTDIR",
@@ -157,8 +163,33 @@ def one_blas_thread_per_rank(environ):
         environ.setdefault(variable, "1")
 
 
+# The commands that come before a case (``python -m parmps validate ...``): name -> module
+# with ``main(argv)`` returning the exit status.
+COMMANDS = {"validate": "parmps.validation.command", "bench": "parmps.validation.bench"}
+
+
+def is_command(argv):
+    """Whether argv starts with a command rather than a case: a command's name that is not
+    also the path of a file."""
+    return bool(argv) and argv[0] in COMMANDS and not os.path.exists(argv[0])
+
+
+def run_command(argv):
+    """Run ``validate`` or ``bench``; bad input is one line and exit status 2."""
+    import importlib
+    try:
+        return importlib.import_module(COMMANDS[argv[0]]).main(argv[1:])
+    except CaseError as exc:
+        print(f"parmps: error: {exc}", file=sys.stderr)
+        return exc.exit_status
+    except SystemExit as exc:  # --help
+        return int(exc.code or 0)
+
+
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
+    if is_command(argv):
+        return run_command(argv)
     one_blas_thread_per_rank(os.environ)
     ours, petsc_options = split_petsc_options(argv)
     debug = "--debug" in ours

@@ -19,7 +19,8 @@ REQUIRED = object()
 class Key:
     """One entry of a section: its type, default and allowed range.
 
-    kind is one of "float", "int", "bool", "str", "vec2" (two floats),
+    kind is one of "float", "int", "bool", "str", "vector" (d floats, d the
+    case's dimension), "vec2" (two floats, whatever the dimension),
     "floats" (a list of floats), "ints" (a list of ints), "options" (a table of
     scalars passed through, e.g. PETSc options), "points" (a list of [x, y]),
     "pairs" (a list of [i, j] integer pairs) or "tables" (an array of tables,
@@ -36,19 +37,19 @@ class Key:
         self.keys = keys
         self.doc = doc
 
-    def check(self, name, value):
+    def check(self, name, value, dimension=2):
         if self.kind == "table":
-            return _validate_table(name, self.keys, value)
+            return _validate_table(name, self.keys, value, dimension=dimension)
         if self.kind == "tables":
             if isinstance(value, dict):
                 value = [value]
             if not isinstance(value, list):
                 raise CaseError(f"{name} must be an array of tables ([[{name}]]), "
                                 f"got {_type_name(value)}")
-            return [_validate_table(f"{name}[{k}]", self.keys, item)
+            return [_validate_table(f"{name}[{k}]", self.keys, item, dimension=dimension)
                     for k, item in enumerate(value)]
-        value = _coerce(name, self.kind, value)
-        for item in (value if self.kind in ("vec2", "floats", "ints") else [value]):
+        value = _coerce(name, self.kind, value, dimension)
+        for item in (value if self.kind in ("vector", "vec2", "floats", "ints") else [value]):
             self._check_range(name, item)
         if self.choices is not None and value not in self.choices:
             raise CaseError(f"{name} must be one of {', '.join(map(repr, self.choices))}, "
@@ -66,6 +67,27 @@ class Key:
             raise CaseError(f"{name} must be < {self.lt}, got {value}")
         if self.le is not None and not value <= self.le:
             raise CaseError(f"{name} must be <= {self.le}, got {value}")
+
+
+class PerDimension:
+    """A vector default that depends on the case's dimension: ``PerDimension(last)`` is
+    d - 1 zeros followed by ``last`` (a zero vector, or gravity along -z in 3D, -y in 2D)."""
+
+    def __init__(self, last=0.0):
+        self.last = float(last)
+
+    def __call__(self, dimension):
+        return [0.0] * (dimension - 1) + [self.last]
+
+    def __repr__(self):
+        return f"{self(2)} in 2D, {self(3)} in 3D"
+
+
+# The zero vector of the case's dimension: the default of velocities.
+ZERO = PerDimension(0.0)
+
+# Components' names, for messages.
+AXES = "xyz"
 
 
 class Section:
@@ -88,7 +110,7 @@ def _type_name(value):
             list: "array", dict: "table"}.get(type(value), type(value).__name__)
 
 
-def _coerce(name, kind, value):
+def _coerce(name, kind, value, dimension=2):
     if kind == "float":
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise CaseError(f"{name} must be a number, got {_type_name(value)} {value!r}")
@@ -108,18 +130,22 @@ def _coerce(name, kind, value):
         if not isinstance(value, str):
             raise CaseError(f"{name} must be a string, got {_type_name(value)} {value!r}")
         return value
-    if kind in ("vec2", "floats", "ints"):
+    if kind in ("vector", "vec2", "floats", "ints"):
         if not isinstance(value, list):
             raise CaseError(f"{name} must be an array, got {_type_name(value)} {value!r}")
         if kind == "vec2" and len(value) != 2:
             raise CaseError(f"{name} must have 2 components [x, y], got {len(value)}")
+        if kind == "vector" and len(value) != dimension:
+            components = ", ".join(AXES[:dimension])
+            raise CaseError(f"{name} has {len(value)} components but the case is {dimension}D "
+                            f"(domain.lower has {dimension}): give [{components}]")
         item_kind = "int" if kind == "ints" else "float"
         return [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
     if kind in ("points", "pairs"):
         if not isinstance(value, list):
             raise CaseError(f"{name} must be an array, got {_type_name(value)} {value!r}")
-        item_kind = "vec2" if kind == "points" else "ints"
-        items = [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
+        item_kind = "vector" if kind == "points" else "ints"
+        items = [_coerce(f"{name}[{k}]", item_kind, v, dimension) for k, v in enumerate(value)]
         if kind == "pairs":
             for k, item in enumerate(items):
                 if len(item) != 2:
@@ -146,7 +172,7 @@ def _unknown(name, key, valid):
     return CaseError(f"unknown key '{where}'{hint}")
 
 
-def _validate_table(name, keys, raw, replaced=None):
+def _validate_table(name, keys, raw, replaced=None, dimension=2):
     if not isinstance(raw, dict):
         raise CaseError(f"{name} must be a table, got {_type_name(raw)}")
     for key in raw:
@@ -158,21 +184,24 @@ def _validate_table(name, keys, raw, replaced=None):
     for key, spec in keys.items():
         full = f"{name}.{key}"
         if key in raw:
-            out[key] = spec.check(full, raw[key])
+            out[key] = spec.check(full, raw[key], dimension)
         elif spec.kind == "table":
-            out[key] = _validate_table(full, spec.keys, {})
+            out[key] = _validate_table(full, spec.keys, {}, dimension=dimension)
         elif spec.default is REQUIRED:
             raise CaseError(f"missing key '{full}'")
+        elif isinstance(spec.default, PerDimension):
+            out[key] = spec.default(dimension)
         else:
             # Copy list defaults so no two cases share one mutable object.
             out[key] = list(spec.default) if isinstance(spec.default, list) else spec.default
     return out
 
 
-def validate_sections(raw, sections):
+def validate_sections(raw, sections, dimension=2):
     """Check a parsed case against ``sections`` (name -> Section); fill in every default.
 
-    ``title`` is the one free top-level string. Returns a plain nested dict.
+    ``title`` is the one free top-level string. Every "vector" key must have
+    ``dimension`` components. Returns a plain nested dict.
     """
     if not isinstance(raw, dict):
         raise CaseError("the case must be a TOML table")
@@ -187,7 +216,8 @@ def validate_sections(raw, sections):
         if name not in raw:
             if section.required:
                 raise CaseError(f"missing section [{name}]")
-            case[name] = [] if section.many else _validate_table(name, section.keys, {})
+            case[name] = [] if section.many else _validate_table(name, section.keys, {},
+                                                                 dimension=dimension)
             continue
         value = raw[name]
         if section.many:
@@ -196,10 +226,11 @@ def validate_sections(raw, sections):
             if not isinstance(value, list):
                 raise CaseError(f"{name} must be an array of tables ([[{name}]]), "
                                 f"got {_type_name(value)}")
-            case[name] = [_validate_table(f"{name}[{k}]", section.keys, item, section.replaced)
+            case[name] = [_validate_table(f"{name}[{k}]", section.keys, item, section.replaced,
+                                          dimension)
                           for k, item in enumerate(value)]
         else:
-            case[name] = _validate_table(name, section.keys, value, section.replaced)
+            case[name] = _validate_table(name, section.keys, value, section.replaced, dimension)
     return case
 
 

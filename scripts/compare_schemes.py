@@ -4,7 +4,7 @@
     scripts/compare_schemes.py [--schemes LABEL ...] [--parts PART ...]
                                [--lobovsky-spacing L0] [--ranks N] [--out DIR]
 
-Each scheme is a set of case overrides (SCHEMES below). Each part runs the
+Each scheme is a set of case overrides (parmps/validation/presets.py). Each part runs the
 scheme through one measurement and appends one JSON line to DIR/results.jsonl
 (default out/schemes/); a scheme and part already there is not run again, so an
 interrupted comparison continues where it stopped. The parts:
@@ -17,84 +17,30 @@ interrupted comparison continues where it stopped. The parts:
 - ``box``: cases/box_in_flow.toml to 0.6 s: the cup's depth (bend) and area error;
 - ``membrane``: cases/membrane_tube.toml to 1.5 s: the mid-point's largest
   inward and outward travel and the tube's area error;
-- ``cost``: scripts/bench.py at about 10k particles on 1 rank, us per particle-step.
+- ``cost``: python -m parmps bench at about 10k particles on 1 rank, us per particle-step.
 
 Then it prints the table (markdown) of every line in the file.
 """
 
 import argparse
 import json
-import math
 import os
-import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-# label -> case overrides, each complete against the defaults and against the Lobovsky case's
-# own choice (mixed (γ 0.1) + GC). "MPS" is the original scheme; Khayyer & Gotoh's HS is
-# the density_rate source, ECS the compensated_rate one, HL the higher_order
-# Laplacian, GC the corrected gradient; KK Kondo & Koshizuka's second difference.
-# The free-surface condition: P = 0 on the free-surface particles, left uncorrected (every
-# scheme before the extrapolated condition), or P = 0 half a spacing beyond them, with the
-# corrected gradient applied to them (the default since).
-DIRICHLET = ['mps.free_surface="dirichlet"']
-EXTRAPOLATED = ['mps.free_surface="extrapolated"']
-SCHEMES = {
-    "MPS": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="minimum"',
-            *DIRICHLET],
-    "MPS + GC": ['mps.source="density"', 'mps.density.kernel="mps"', 'mps.gradient="corrected"',
-                 *DIRICHLET],
-    "MPS (smooth n) + GC": ['mps.source="density"', 'mps.density.kernel="smooth"',
-                            'mps.gradient="corrected"', *DIRICHLET],
-    "mixed": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", 'mps.gradient="minimum"',
-              *DIRICHLET],
-    "mixed + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.01",
-                   'mps.gradient="corrected"', *DIRICHLET],
-    "mixed (γ 0.1) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                           'mps.gradient="corrected"', *DIRICHLET],
-    "mixed (γ 0.1, smooth n) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                                     'mps.mixed.kernel="smooth"', 'mps.gradient="corrected"',
-                                     *DIRICHLET],
-    "HS": ['mps.source="density_rate"', 'mps.gradient="minimum"', *DIRICHLET],
-    "HS + HL": ['mps.source="density_rate"', 'mps.laplacian="higher_order"',
-                'mps.gradient="minimum"', *DIRICHLET],
-    "HS (lattice) + GC": ['mps.source="density_rate"',
-                          'mps.density_rate.normalisation="lattice"',
-                          'mps.gradient="corrected"', *DIRICHLET],
-    "HS + ECS + HL + GC": ['mps.source="compensated_rate"', 'mps.laplacian="higher_order"',
-                           'mps.gradient="corrected"', *DIRICHLET],
-    "HS + ECS (lattice) + GC": ['mps.source="compensated_rate"',
-                                'mps.compensated_rate.normalisation="lattice"',
-                                'mps.gradient="corrected"', *DIRICHLET],
-    "KK": ['mps.source="density_acceleration"', 'mps.gradient="minimum"', *DIRICHLET],
-    "KK + GC": ['mps.source="density_acceleration"', 'mps.gradient="corrected"', *DIRICHLET],
-    "MPS (smooth n) + GC, extrapolated surface": ['mps.source="density"',
-                                                  'mps.density.kernel="smooth"',
-                                                  'mps.gradient="corrected"', *EXTRAPOLATED],
-    "mixed (γ 0.1) + GC, extrapolated surface": ['mps.source="mixed"',
-                                                 "mps.mixed.relaxation=0.1",
-                                                 'mps.gradient="corrected"', *EXTRAPOLATED],
-}
+from parmps.validation import launch  # noqa: E402
+from parmps.validation.presets import COMPARED, SCHEMES  # noqa: E402
+
 PARTS = ("tank1cm", "tank5mm", "lobovsky", "box", "membrane", "cost")
 
 
 def run_parmps(case, directory, overrides, end_time, ranks, extra=()):
-    """Run parmps; returns (exit status, result path, the command as typed)."""
-    command = [sys.executable, "-m", "parmps", os.path.join(ROOT, case), "-o", directory,
-               "--end-time", repr(end_time)]
-    for override in list(overrides) + list(extra):
-        command += ["--set", override]
-    environment = None
-    if ranks > 1:
-        from parmps.parallel.mpi import launch_environment, mpirun_command
-        command = mpirun_command(ranks, command)
-        environment = launch_environment()
-    status = subprocess.run(command, env=environment, cwd=ROOT,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                            text=True).returncode
-    return status, os.path.join(directory, "result.h5")
+    """Run parmps through the package's launcher; returns (exit status, result path)."""
+    record = launch.run(os.path.join(ROOT, case), directory, list(overrides) + list(extra),
+                        end_time, ranks=ranks, timeout=None, root=ROOT, cwd=ROOT)
+    return record["status"], os.path.join(directory, "result.h5")
 
 
 def summary(result):
@@ -124,13 +70,9 @@ def measure_tank(result):
 
 def lobovsky(label, overrides, spacing, directory, ranks):
     from parmps import validation
-    from parmps.tools import analysis
     check = validation.load("dam_break_lobovsky")
-    case = check.case([f"particles.spacing={spacing!r}"])
-    lower, upper = analysis.fluid_extent(case)
-    end = check.run["until"] / math.sqrt(analysis.gravity(case) / (upper[1] - lower[1]))
-    status, result = run_parmps(check.case_path, directory, overrides, end, ranks,
-                                [f"particles.spacing={spacing!r}", "output.frames=false"])
+    end, sets = check.run_arguments([f"particles.spacing={spacing!r}"])
+    status, result = run_parmps(check.case_path, directory, overrides, end, ranks, sets)
     record = summary(result)
     record["status"] = status
     if os.path.isfile(result):
@@ -143,8 +85,9 @@ def lobovsky(label, overrides, spacing, directory, ranks):
 
 
 def box(label, overrides, spacing, directory, ranks):
-    import h5py
     import numpy as np
+
+    from parmps import open_result
     from parmps.tools import analysis
     status, result = run_parmps("cases/box_in_flow.toml", directory, overrides, 0.6, ranks,
                                 ["time.output_interval=0.6"])
@@ -153,17 +96,17 @@ def box(label, overrides, spacing, directory, ranks):
     if os.path.isfile(result):
         case = analysis.result_case(result)
         record["volume_error"] = analysis.volume_error(result, case)["volume_error"]
-        with h5py.File(result, "r") as handle:
-            last = sorted(handle["frames"])[-1]
-            nodes = handle["frames"][last]["solids/box/position"][()]
+        with open_result(result) as read:
+            nodes = read.frames[-1].bodies["box"]["position"]
         record["bend"] = float(analysis.lattice_bend(nodes, case["body"][0]))
         record["bend_time"] = float(np.round(case["time"]["end"], 6))
     return record
 
 
 def membrane(label, overrides, spacing, directory, ranks):
-    import h5py
     import numpy as np
+
+    from parmps import open_result
     from parmps.tools import analysis
     status, result = run_parmps("cases/membrane_tube.toml", directory, overrides, 1.5, ranks,
                                 ["time.output_interval=0.01"])
@@ -172,10 +115,8 @@ def membrane(label, overrides, spacing, directory, ranks):
     if os.path.isfile(result):
         case = analysis.result_case(result)
         record["volume_error"] = analysis.volume_error(result, case)["volume_error"]
-        middle = []
-        with h5py.File(result, "r") as handle:
-            for name in sorted(handle["frames"]):
-                middle.append(handle["frames"][name]["solids/membrane/position"][19, 1])
+        with open_result(result) as read:
+            middle = [frame.bodies["membrane"]["position"][19, 1] for frame in read.frames]
         travel = np.asarray(middle) - middle[0]
         record["inward"] = float(-travel.min())
         record["outward"] = float(travel.max())
@@ -183,10 +124,10 @@ def membrane(label, overrides, spacing, directory, ranks):
 
 
 def cost(label, overrides, spacing, directory, ranks):
-    command = [sys.executable, os.path.join(ROOT, "scripts", "bench.py"), "--particles",
-               "10000", "--steps", "20", "--warmup", "5"]
+    command = [sys.executable, "-m", "parmps", "bench", "--particles", "10000", "--steps", "20",
+               "--warmup", "5"]
     command += [word for override in overrides for word in ("--set", override)]
-    output = subprocess.run(command, capture_output=True, text=True, cwd=ROOT).stdout
+    _, output, _, _ = launch.execute(command, timeout=None, cwd=ROOT, spin=True)
     lines = [json.loads(line) for line in output.splitlines() if line.startswith("{")]
     if not lines or "error" in lines[-1]:
         return {"status": 1}
@@ -250,7 +191,7 @@ def table(records):
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--schemes", nargs="+", default=list(SCHEMES), choices=list(SCHEMES),
+    parser.add_argument("--schemes", nargs="+", default=list(COMPARED), choices=list(SCHEMES),
                         metavar="LABEL")
     parser.add_argument("--parts", nargs="+", default=list(PARTS), choices=PARTS)
     parser.add_argument("--lobovsky-spacing", type=float, default=0.01)
@@ -312,7 +253,7 @@ def write_report(path, records):
 Generated by `scripts/compare_schemes.py --write {os.path.relpath(path, ROOT)}` from
 `out/schemes/results.jsonl` (machine: {platform.machine()}, {os.cpu_count()} cores, shared with
 other runs; wall times are loop times). The schemes (docs/design.md §1.4) and their overrides
-are the `SCHEMES` table of the script; MPS is the original scheme and the default before this
+are the `SCHEMES` table of parmps/validation/presets.py; MPS is the original scheme and the default before this
 comparison (density source with the number density n, standard Laplacian, minimum-pressure
 gradient); the default now is "MPS (smooth n) + GC", the density source measured with a smooth
 sum (Wendland's C2 on the number density's radius) and the corrected gradient. Before it came

@@ -26,17 +26,14 @@ from parmps.tools import analysis  # noqa: E402
 
 def frames_near(path, times):
     """(time, fluid positions, node positions) of the frame nearest each of ``times``."""
-    import h5py
+    import parmps
     out = []
-    with h5py.File(path, "r") as handle:
-        names = sorted(handle["frames"])
-        stamps = np.array([handle["frames"][n].attrs["time"] for n in names])
+    with parmps.open_result(path) as result:
         for t in times:
-            group = handle["frames"][names[int(np.argmin(np.abs(stamps - t)))]]
-            kind = group["kind"][()]
-            position = group["position"][()]
-            out.append((float(group.attrs["time"]), position[kind == FLUID],
-                        position[kind == SOLID], position[(kind != FLUID) & (kind != SOLID)]))
+            frame = result.frames.nearest(t)
+            kind, position = frame.kind, frame.position
+            out.append((frame.time, position[kind == FLUID], position[kind == SOLID],
+                        position[(kind != FLUID) & (kind != SOLID)]))
     return out
 
 
@@ -51,8 +48,8 @@ def main():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    path = args.output if args.output.endswith(".h5") else os.path.join(args.output,
-                                                                         "result.h5")
+    from parmps.result import result_path
+    path = result_path(args.output)
     check = validation.load("elastic_gate")
     measured = check.measure(path)
     case = analysis.result_case(path)

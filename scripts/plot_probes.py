@@ -23,25 +23,24 @@ def main():
     parser.add_argument("--png", default=None, help="default: OUT/probes.png")
     args = parser.parse_args()
 
-    import h5py
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    path = args.output if args.output.endswith(".h5") else os.path.join(args.output,
-                                                                         "result.h5")
+    import parmps
+    from parmps.result import result_path
+    path = result_path(args.output)
     png = args.png or os.path.join(os.path.dirname(path), "probes.png")
     wanted = [name for name in args.probes.split(",") if name]
     series = {}
-    with h5py.File(path, "r") as handle:
-        if "probes" not in handle:
+    with parmps.open_result(path) as result:
+        if not result.probes:
             print(f"{path} has no probes", file=sys.stderr)
             return 1
-        for name, group in handle["probes"].items():
+        for name, probe in result.probes.items():
             if wanted and name not in wanted:
                 continue
-            series[name] = (group.attrs["kind"], group.attrs["units"], group["time"][()],
-                            group["value"][()])
+            series[name] = (probe.attrs["kind"], probe.attrs["units"], probe.time, probe.value)
     kinds = sorted({kind for kind, *_ in series.values()})
     figure, axes = plt.subplots(len(kinds), 1, figsize=(8, 3 * len(kinds)), dpi=110,
                                 sharex=True, squeeze=False)

@@ -17,10 +17,9 @@ Prints the measured numbers.
 
 import argparse
 import pathlib
-import subprocess
 import sys
 
-import h5py
+import parmps
 import matplotlib
 
 matplotlib.use("Agg")
@@ -45,24 +44,20 @@ def run_case(case, directory, in_process):
         Simulation(schema.validate(config.load_text(text)), text, MPI.COMM_WORLD,
                  str(directory)).execute()
         return
-    subprocess.run([sys.executable, "-m", "parmps", str(case), "-o", str(directory)],
-                   check=True, cwd=ROOT)
+    from parmps.validation import launch
+    record = launch.run(case, directory, timeout=None, root=ROOT, cwd=ROOT)
+    if record["status"] != 0:
+        sys.exit(f"{record['command']}: {record['outcome']}")
 
 
 def read_result(directory):
-    with h5py.File(directory / "result.h5", "r") as handle:
-        (name,) = list(handle["solids"])
-        solids = handle["solids"][name]
-        series = {key: solids[key][()] for key in ("time", "volume_error", "centroid")}
-        series["springs"] = solids["springs"][()]
-        frames = {}
-        for step in handle["frames"]:
-            group = handle["frames"][step]
-            frames[float(group.attrs["time"])] = group["solids"][name]["position"][()]
-        import tomllib
-        case = tomllib.loads(handle["case"].attrs["toml"])
-    series["frames"] = frames
-    series["load"] = case["body"][0]["load"][0]
+    with parmps.open_result(directory) as result:
+        (name,) = list(result.bodies)
+        body = result.bodies[name]
+        series = {key: body[key] for key in ("time", "volume_error", "centroid", "springs")}
+        series["frames"] = {frame.time: frame.bodies[name]["position"]
+                            for frame in result.frames}
+        series["load"] = result.case["body"][0]["load"][0]
     return series
 
 

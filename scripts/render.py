@@ -25,7 +25,7 @@ import logging
 import tomllib
 from pathlib import Path
 
-import h5py
+import parmps
 import matplotlib
 
 matplotlib.use("Agg")
@@ -41,20 +41,15 @@ DPI = 72  # committed pictures stay well under 150 KB
 
 
 def load(path):
-    with h5py.File(path, "r") as handle:
-        case = tomllib.loads(handle["case"].attrs["toml"])
+    with parmps.open_result(path) as result:
+        case = tomllib.loads(result.case_text)
         frames = []
-        for name in sorted(handle["frames"]):
-            group = handle["frames"][name]
-            frame = {key: group[key][()] for key in ("kind", "position", "pressure")}
-            frame["time"] = float(group.attrs["time"])
-            frame["solids"] = {body: group["solids"][body]["position"][()]
-                               for body in group.get("solids", {})}
-            frames.append(frame)
-        bodies = {}
-        for body in handle.get("solids", {}):
-            group = handle["solids"][body]
-            bodies[body] = {key: group[key][()] for key in group}
+        for frame in result.frames:
+            data = {key: frame[key] for key in ("kind", "position", "pressure")}
+            data["time"] = frame.time
+            data["solids"] = {body: frame.bodies[body]["position"] for body in frame.bodies}
+            frames.append(data)
+        bodies = {name: dict(body) for name, body in result.bodies.items()}
     return case, frames, bodies
 
 

@@ -29,15 +29,18 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(HERE)
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
-sys.path.insert(0, HERE)
-
-from study import run  # noqa: E402
 
 from parmps import validation  # noqa: E402
 from parmps.tools import analysis  # noqa: E402
+from parmps.validation import launch  # noqa: E402
+
+
+def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600):
+    """One run through the package's launcher, from the repository."""
+    return launch.run(case, out, sets, end_time, petsc, ranks, timeout, root=ROOT, cwd=ROOT)
+
 
 BOX_DENSITY_RATIOS = (0.01, 0.1, 0.3, 1.0, 10.0)
 BOX_INFLOW_FACTORS = (1.0, 2.0, 5.0, 10.0)

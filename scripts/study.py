@@ -25,9 +25,6 @@ import json
 import math
 import os
 import platform
-import shlex
-import signal
-import subprocess
 import sys
 import time
 
@@ -38,97 +35,21 @@ sys.path.insert(0, ROOT)
 
 from parmps import validation  # noqa: E402
 from parmps.tools import analysis  # noqa: E402
+from parmps.validation import launch  # noqa: E402
+from parmps.validation.presets import SCHEMES, STUDIED  # noqa: E402
 from parmps.tools.analysis import log_slope as slope  # noqa: E402
 
-# The pressure schemes compared, as case overrides: the one place that names their keys.
-# The dam break's front against resolution for the original and the default scheme;
-# every registered scheme on every measurement: scripts/compare_schemes.py.
-PRESSURE_SCHEMES = {
-    "density": ['mps.source="density"', 'mps.gradient="minimum"'],
-    "default": [],
-    "default, no clamp": ["mps.clamp_negative_pressure=false"],
-}
+# The pressure schemes of the sweeps: presets of the package's one table.
+PRESSURE_SCHEMES = {label: SCHEMES[label] for label in STUDIED}
 
 
 # --------------------------------------------------------------------------
 # Running parmps
 
-def parmps_command(case, out, sets=(), end_time=None, petsc=(), ranks=1):
-    argv = [sys.executable, "-m", "parmps", case, "-o", out]
-    if end_time is not None:
-        argv += ["--end-time", f"{end_time:.6g}"]
-    for item in sets:
-        argv += ["--set", item]
-    argv += list(petsc)
-    if ranks > 1:
-        from parmps.parallel.mpi import mpirun_command
-        argv = mpirun_command(ranks, argv)
-    return argv
-
-
-def shown(argv):
-    """The command as a user would type it (repo-relative, python for the interpreter)."""
-    words = []
-    argv = list(argv)
-    if "--mca" in argv:  # mpirun_command's transport choice: noise for a reader
-        at = argv.index("--mca")
-        del argv[at:at + 3]
-    for word in argv:
-        if word == sys.executable:
-            word = "python"
-        elif isinstance(word, str) and word.startswith(ROOT + os.sep):
-            word = os.path.relpath(word, ROOT)
-        words.append(shlex.quote(str(word)))
-    text = " ".join(words)
-    return text.replace("mpirun -n", "mpirun -q -n")
-
-
 def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600):
-    """Run one case; returns a record with the outcome, the message and the wall times."""
-    from parmps.parallel.mpi import launch_environment
-    argv = parmps_command(case, out, sets, end_time, petsc, ranks)
-    env = launch_environment()
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-    env.setdefault("PETSC_DIR", "/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real")
-    # Ranks that spin while waiting lose badly on a machine busier than its cores.
-    env.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
-    start = time.perf_counter()
-    # A new session, so a timeout kills mpirun and every rank with it.
-    process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               env=env, cwd=ROOT, start_new_session=True)
-    try:
-        _, stderr = process.communicate(timeout=timeout)
-        status = process.returncode
-    except subprocess.TimeoutExpired:
-        for sig in (signal.SIGTERM, signal.SIGKILL):
-            try:
-                os.killpg(process.pid, sig)
-                process.communicate(timeout=5)
-                break
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                continue
-        stderr, status = "", None
-    elapsed = time.perf_counter() - start
-    errors = [line[len("parmps: error: "):] for line in stderr.splitlines()
-              if line.startswith("parmps: error:")]
-    result = os.path.join(out, "result.h5")
-    record = {"command": shown(argv), "ranks": ranks, "status": status,
-              "elapsed": elapsed, "result": result,
-              "message": errors[0] if errors else ""}
-    if status is None:
-        record["outcome"] = f"hung: killed after {timeout} s"
-    elif status == 0:
-        record["outcome"] = "ran to the end"
-    elif errors:
-        record["outcome"] = "stopped: " + errors[0]
-    else:
-        record["outcome"] = f"exit {status} without a message: " + " | ".join(
-            stderr.strip().splitlines()[-2:])
-    record.update(analysis.run_summary(result) if os.path.exists(result) else {})
-    if status == 0 and not record.get("finite", False):
-        record["outcome"] = "ran to the end with NON-FINITE values (no message)"
-    return record
+    """One run through the package's launcher, from the repository (commands shown
+    relative to it); returns its record (parmps.validation.launch.run)."""
+    return launch.run(case, out, sets, end_time, petsc, ranks, timeout, root=ROOT, cwd=ROOT)
 
 
 def median_wall(records):

@@ -19,7 +19,6 @@ sensitivity study of the release, not a fit.
 
 import argparse
 import os
-import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -120,15 +119,12 @@ def run_case(check, args, case_width):
     case_path = check.case_path
     if args.gate_speed is not None:
         case_path = case_with_gate(check.case_path, directory, case, args.gate_speed)
-    command = [sys.executable, "-m", "parmps", case_path, "-o", directory,
-               "--end-time", repr(end_time), "--set", f"time.output_interval={interval!r}"]
-    command += [word for override in overrides for word in ("--set", override)]
-    if args.ranks > 1:
-        from parmps.parallel.mpi import launch_environment, mpirun_command
-        subprocess.run(mpirun_command(args.ranks, command), check=True,
-                       env=launch_environment())
-    else:
-        subprocess.run(command, check=True)
+    from parmps.validation import launch
+    sets = [f"time.output_interval={interval!r}"] + overrides
+    record = launch.run(case_path, directory, sets, end_time, ranks=args.ranks, timeout=None,
+                        root=ROOT)
+    if record["status"] != 0:
+        sys.exit(f"{record['command']}: {record['outcome']}")
     return os.path.join(directory, "result.h5")
 
 

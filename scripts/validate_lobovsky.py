@@ -16,9 +16,7 @@ Exit status 1 when a judged sensor misses a target.
 """
 
 import argparse
-import math
 import os
-import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -30,7 +28,7 @@ RUNNING_MEAN = 0.05
 
 
 def main():
-    from parmps import validation
+    from parmps import open_result, validation
     from parmps.tools import analysis
 
     check = validation.load("dam_break_lobovsky")
@@ -54,7 +52,7 @@ def main():
     lower, upper = analysis.fluid_extent(case)
     height = upper[1] - lower[1]
     g = analysis.gravity(case)
-    time_scale = math.sqrt(g / height)
+    time_scale = analysis.column_time_scale(case)
     scale = case["fluid"]["density"] * g * height
     spacing = case["particles"]["spacing"]
     scheme = (f"source {case['mps']['source']}, gradient {case['mps']['gradient']}, "
@@ -123,10 +121,9 @@ def main():
             if not abs(row["mean_error"]) <= tolerance["mean"]:
                 failed.append(f"{name} mean {100 * row['mean_error']:+.1f} % "
                               f"(target ±{100 * tolerance['mean']:.0f} %)")
-    import h5py
-    with h5py.File(result, "r") as handle:
-        complete = bool(handle.attrs["complete"])
-        reached = float(handle["diagnostics"]["time"][-1]) * time_scale
+    with open_result(result) as read:
+        complete = read.complete
+        reached = float(read.diagnostics["time"][-1]) * time_scale
     if not complete or reached < check.metric["mean_window"][1]:
         # The mean then covers only part of its window: nothing is judged met.
         failed.append(f"the run stopped at t* = {reached:.2f} (complete: {complete})")
@@ -138,24 +135,15 @@ def main():
 
 def run_case(check, args):
     """Run the validation's case as asked on the command line; returns the result file."""
-    from parmps.tools import analysis
-
+    from parmps.validation import launch
     overrides = list(args.overrides)
     if args.spacing is not None:
         overrides.append(f"particles.spacing={args.spacing!r}")
-    case = check.case(overrides)
-    lower, upper = analysis.fluid_extent(case)
-    end_time = check.run["until"] / math.sqrt(analysis.gravity(case) / (upper[1] - lower[1]))
+    end_time, sets = check.run_arguments(overrides)
     directory = os.path.join(ROOT, "out", f"lobovsky{args.name}")
-    command = [sys.executable, "-m", "parmps", check.case_path, "-o", directory,
-               "--end-time", repr(end_time), "--set", "output.frames=false"]
-    command += [word for override in overrides for word in ("--set", override)]
-    if args.ranks > 1:
-        from parmps.parallel.mpi import launch_environment, mpirun_command
-        status = subprocess.run(mpirun_command(args.ranks, command),
-                                env=launch_environment()).returncode
-    else:
-        status = subprocess.run(command).returncode
+    record = launch.run(check.case_path, directory, sets, end_time, ranks=args.ranks,
+                        timeout=None, root=ROOT)
+    status = record["status"]
     path = os.path.join(directory, "result.h5")
     if status != 0:
         if not os.path.isfile(path):

@@ -1,25 +1,22 @@
 """Shared helpers: run parmps as a user would, serially or under mpirun, with a timeout."""
 
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from parmps.parallel.mpi import launch_environment, run_mpirun
+from parmps.parallel.mpi import mpirun_command
+from parmps.validation import launch
 
 ROOT = Path(__file__).resolve().parents[1]
 CASES = ROOT / "cases"
 
 
 def mpi_environment():
-    env = dict(os.environ)
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
-    env.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
-    env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
-    env.setdefault("PETSC_DIR", "/usr/lib/petscdir/petsc3.18/x86_64-linux-gnu-real")
-    return env
+    """The environment of a launched run (parmps.validation.launch): PETSc is found by the
+    package itself, Open MPI gets its consent to root."""
+    return launch.environment()
 
 
 def run_parmps(args, ranks=1, timeout=300, cwd=None):
@@ -28,19 +25,17 @@ def run_parmps(args, ranks=1, timeout=300, cwd=None):
 
 
 def run_python(args, ranks=1, timeout=300, cwd=None):
-    """Run ``python ARGS`` (under mpirun when ranks > 1) with a timeout.
-
-    Under mpirun the whole process group is killed on timeout, ranks included.
-    """
+    """Run ``python ARGS`` (under mpirun when ranks > 1) with a timeout, through the package's
+    launcher: on timeout the whole process group is killed, ranks included, and the test
+    fails."""
     args = [str(a) for a in args]
-    try:
-        if ranks > 1:
-            return run_mpirun(ranks, [sys.executable] + args, timeout, cwd=cwd or ROOT,
-                              env=launch_environment(mpi_environment()))
-        return subprocess.run([sys.executable] + args, capture_output=True, text=True,
-                              timeout=timeout, env=mpi_environment(), cwd=cwd or ROOT)
-    except subprocess.TimeoutExpired as exc:
-        pytest.fail(f"timed out after {timeout} s: {' '.join(args)}\n{exc.stderr}")
+    argv = [sys.executable] + args
+    if ranks > 1:
+        argv = mpirun_command(ranks, argv)
+    status, stdout, stderr, _ = launch.execute(argv, timeout, cwd=cwd or ROOT)
+    if status is None:
+        pytest.fail(f"timed out after {timeout} s: {' '.join(args)}")
+    return subprocess.CompletedProcess(argv, status, stdout, stderr)
 
 
 def error_lines(stderr):

@@ -240,3 +240,33 @@ def test_one_blas_thread_per_rank_unless_the_user_chose(monkeypatch):
         monkeypatch.delenv(variable, raising=False)
     assert cli.main(["--help"]) == 0
     assert all(os.environ[variable] == "1" for variable in cli.BLAS_THREAD_VARIABLES)
+
+
+def test_nothing_outside_parallel_names_a_decomposition():
+    """The solver, the coupling, the boundaries and the output get their decomposition from
+    parmps.parallel.create_decomposition: no module outside parmps.parallel imports a
+    decomposition's module or class, so a new decomposition needs no change elsewhere."""
+    from parmps.parallel import DECOMPOSITIONS
+    modules = {target.split(":")[0] for target in DECOMPOSITIONS.values()}
+    classes = {target.split(":")[1] for target in DECOMPOSITIONS.values()}
+    offenders = []
+    for name in _modules():
+        if name.startswith("parmps.parallel"):
+            continue
+        path = PACKAGE.joinpath(*name.split(".")[1:])
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                imported = {f"{node.module}.{alias.name}" for alias in node.names}
+                named = {alias.name for alias in node.names}
+                if node.module in modules or imported & modules or named & classes:
+                    offenders.append(f"{name}: from {node.module} import "
+                                     f"{', '.join(sorted(named))}")
+            elif isinstance(node, ast.Import):
+                offenders += [f"{name}: import {alias.name}" for alias in node.names
+                              if alias.name in modules]
+            elif isinstance(node, ast.Name) and node.id in classes:
+                offenders.append(f"{name}: names {node.id}")
+    assert not offenders, offenders
+    # The check can fail: the slabs' module is registered and names its class.
+    assert "parmps.parallel.slabs" in modules and "SlabDecomposition" in classes

@@ -31,7 +31,8 @@ CASES_WITH_ERRORS = {
                               "time.end must be > 0.0, got 0.0"),
     "vector of wrong length": (BASE.replace("lower = [0.0, 0.0]\nupper = [0.2, 0.2]",
                                             "lower = [0.0, 0.0, 0.0]\nupper = [0.2, 0.2]"),
-                               "fluid_block[0].lower must have 2 components"),
+                               "fluid_block[0].lower has 3 components but the case is 2D "
+                               "(domain.lower has 2): give [x, y]"),
     "fluid overlapping walls": (BASE.replace("lower = [0.0, 0.0]\nupper = [0.2, 0.2]",
                                              "lower = [-0.02, 0.0]\nupper = [0.2, 0.2]"),
                                 "fluid_block[0] overlaps tank[0]"),
@@ -60,7 +61,7 @@ CASES_WITH_ERRORS.update({
     "wall velocity not an array": (_tank_with('velocity = "fast"'),
                                    "tank[0].velocity must be an array, got string"),
     "wall velocity of 3 components": (_tank_with("velocity = [0.0, 0.1, 0.0]"),
-                                      "tank[0].velocity must have 2 components"),
+                                      "tank[0].velocity has 3 components but the case is 2D"),
     "box velocity component not a number": (BASE + BOX + 'velocity = [0.1, "up"]\n',
                                             "wall_box[0].velocity[1] must be a number"),
     "negative move_start": (_tank_with("move_start = -0.1"),

@@ -1,18 +1,16 @@
-"""scripts/bench.py --time-to-solution on a tiny run: the option works and its line says what
-it should. Speed targets live in the script's output, never in a timed test."""
+"""python -m parmps bench --time-to-solution on a tiny run: the option works and its line says
+what it should. Speed targets live in the command's output, never in a timed test."""
 
 import json
 
 import pytest
 
-from conftest import ROOT, run_python
-
-BENCH = ROOT / "scripts" / "bench.py"
+from conftest import run_parmps
 
 
 def test_time_to_solution_prints_one_line_per_run():
     # l0 = 12.5 mm and 10 ms: a few dozen steps of the peer dam break.
-    result = run_python([BENCH, "--time-to-solution", "--spacing", "0.0125", "--ranks", "1",
+    result = run_parmps(["bench", "--time-to-solution", "--spacing", "0.0125", "--ranks", "1",
                          "--end-time", "0.01", "--set", "time.output_interval=0.005"],
                         timeout=240)
     assert result.returncode == 0, result.stderr
@@ -32,7 +30,7 @@ def test_time_to_solution_prints_one_line_per_run():
 
 
 def test_time_to_solution_reports_a_failed_run():
-    result = run_python([BENCH, "--time-to-solution", "--spacing", "0.0125", "--ranks", "1",
+    result = run_parmps(["bench", "--time-to-solution", "--spacing", "0.0125", "--ranks", "1",
                          "--end-time", "0.01", "--set", "time.cfl=2"], timeout=120)
     assert result.returncode == 1
     (line,) = [json.loads(text) for text in result.stdout.splitlines() if text.startswith("{")]

@@ -1,12 +1,11 @@
 """Run-time checks (parmps.checks): fluid crossing a thin body's mid-line, counted every step;
 and the displacement probe that follows a body's nodes."""
 
-import h5py
 import numpy as np
 import pytest
 
 from conftest import error_lines, run_parmps
-from parmps import schema
+from parmps import open_result, schema
 from parmps.checks import CHECKS
 from parmps.checks.crossing import count_crossings, lattice_mid_line, mid_line_sides
 from parmps.errors import CaseError
@@ -145,17 +144,15 @@ def test_displacement_probe_follows_the_nodes_and_the_check_is_in_the_output(tmp
                     'nodes = [0, 1, 2]\n\n[[check]]\nkind = "body_crossing"\nbody = "gate"\n')
     result = run_parmps([path, "-o", tmp_path / "out"], timeout=300)
     assert result.returncode == 0, result.stderr
-    with h5py.File(tmp_path / "out" / "result.h5", "r") as handle:
-        value = handle["probes/tip/value"][-1]
-        frame = handle["frames"][sorted(handle["frames"])[-1]]
-        position = frame["solids/gate/position"][:3].mean(axis=0)
+    with open_result(tmp_path / "out") as run:
+        value = run.probes["tip"].value[-1]
+        position = run.frames[-1].bodies["gate"]["position"][:3].mean(axis=0)
         rest = np.array([0.115, 0.005])
         assert np.allclose(value, position - rest, rtol=0, atol=1e-12)
-        assert np.abs(handle["probes/tip/value"][:]).max() > 0.0
-        checks = handle["checks/body_crossing_gate"]
-        steps = len(handle["diagnostics/time"])
-        assert len(checks["time"]) == steps
-        assert checks["total"][-1] == checks["crossings"][:].sum()
+        assert np.abs(run.probes["tip"].value).max() > 0.0
+        checks = run.checks["body_crossing_gate"]
+        assert len(checks.time) == len(run.diagnostics.time)
+        assert checks.total[-1] == checks.crossings.sum()
 
 
 def test_check_and_displacement_go_on_after_a_restart_without_repeating_rows(tmp_path):
@@ -173,10 +170,9 @@ def test_check_and_displacement_go_on_after_a_restart_without_repeating_rows(tmp
         assert result.returncode == 0, result.stderr[-3000:]
     rows = {}
     for name, out in (("whole", whole), ("split", split)):
-        with h5py.File(out / "result.h5", "r") as handle:
-            rows[name] = (handle["checks/body_crossing_gate/time"][()],
-                          handle["checks/body_crossing_gate/total"][()],
-                          handle["probes/tip/value"][()])
+        with open_result(out) as run:
+            check = run.checks["body_crossing_gate"]
+            rows[name] = (check.time, check.total, run.probes["tip"].value)
     np.testing.assert_allclose(rows["split"][0], rows["whole"][0], rtol=1e-12)
     np.testing.assert_array_equal(rows["split"][1], rows["whole"][1])
     np.testing.assert_allclose(rows["split"][2], rows["whole"][2], rtol=0, atol=1e-9)

@@ -11,12 +11,11 @@ import subprocess
 import sys
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
 from conftest import CASES, ROOT, error_lines, run_parmps
-from parmps import validation
+from parmps import open_result, validation
 from parmps.io.frames import read_frame
 from parmps.tools import analysis
 
@@ -29,14 +28,13 @@ VOLUME_TOLERANCE = {"membrane": CHECKS["membrane_tube"].tolerance["volume_error"
 
 
 def solids(path, body):
-    with h5py.File(path, "r") as handle:
-        group = handle["solids"][body]
-        return {key: group[key][()] for key in group}
+    with open_result(path) as run:
+        return dict(run.bodies[body])
 
 
 def diagnostics(path):
-    with h5py.File(path, "r") as handle:
-        return {key: value[()] for key, value in handle["diagnostics"].items()}
+    with open_result(path) as run:
+        return dict(run.diagnostics)
 
 
 def check_run(result, out, end_time, bodies):
@@ -102,15 +100,14 @@ def test_membrane_tube_on_two_ranks(tmp_path):
     check_run(result, out, end, ["membrane"])
     values = solids(out / "result.h5", "membrane")
     # The load pushed the membrane in: its lower row's middle node moved down.
-    with h5py.File(out / "result.h5", "r") as handle:
-        for name, frame in handle["frames"].items():
-            nodes = frame["solids/membrane/position"][()]
+    with open_result(out) as run:
+        for frame in run.frames:
+            nodes = frame.bodies["membrane"]["position"]
             lower_row = nodes[:39]
-            kind, position = frame["kind"][()], frame["position"][()]
-            fluid = position[kind == 0]
+            fluid = frame.position[frame.kind == 0]
             below = fluid[:, 1] < np.interp(fluid[:, 0], lower_row[:, 0], lower_row[:, 1])
-            assert below.all(), f"fluid above the membrane's lower row at {name}"
-            if name == "00000000":
+            assert below.all(), f"fluid above the membrane's lower row at step {frame.step}"
+            if frame.step == 0:
                 start = nodes[19, 1]
             middle = nodes[19, 1]
     assert np.abs(values["fluid_force"][:, 1]).max() > 0
@@ -138,9 +135,8 @@ def test_box_in_flow_on_two_ranks(tmp_path):
     # Carried along -x.
     assert values["centroid"][-1, 0] < values["centroid"][0, 0] - tolerance["carried"]
     frame = read_frame(out / "result.h5")
-    with h5py.File(out / "result.h5", "r") as handle:
-        last = sorted(handle["frames"])[-1]
-        nodes = handle["frames"][last]["solids/box/position"][()]
+    with open_result(out) as run:
+        nodes = run.frames[-1].bodies["box"]["position"]
     # The full run bends 7 mm by 0.6 s and 20 mm by 2 s (README); a rigid carry, 0.
     assert box_bend(nodes) > tolerance["bend"], box_bend(nodes)
     fluid = frame["kind"] == 0

@@ -1,9 +1,9 @@
-"""Slab decomposition: distribute, halo, refresh, migration, rebalance, refusals, aborts.
+"""Domain decompositions: distribute, halo, refresh, migration, rebalance, refusals, aborts.
 
 The checks live in tests/mpi/decomposition_worker.py. They run here on one rank
-in-process, and under ``mpirun -n 2`` and ``mpirun -n 3 --oversubscribe`` once
-per rank count (one job runs every check; each check is reported as its own
-test). Every mpirun has a timeout, so a deadlock fails instead of hanging.
+in-process, and under ``mpirun -n 2``, ``-n 3`` and ``-n 4`` (oversubscribed)
+once per rank count (one job runs every check; each check is reported as its
+own test). Every mpirun has a timeout, so a deadlock fails instead of hanging.
 """
 
 import importlib.util
@@ -41,7 +41,7 @@ def test_one_rank(name):
     assert results[name] is None, results[name]
 
 
-@pytest.fixture(scope="module", params=[2, 3], ids=lambda n: f"{n}ranks")
+@pytest.fixture(scope="module", params=[2, 3, 4], ids=lambda n: f"{n}ranks")
 def mpi_results(request, tmp_path_factory):
     ranks = request.param
     out = tmp_path_factory.mktemp(f"decomposition{ranks}") / "results.json"
@@ -59,6 +59,27 @@ def test_mpi(mpi_results, name):
     assert mpi_results[name] is None, mpi_results[name]
 
 
+# On eight ranks the blocks are a 2 x 2 x 2 grid in 3D and 4 x 2 in 2D: every kind of
+# neighbour (faces, edges, corners) and three levels of nested cuts. (The slabs' scenes hold
+# at most six slabs, and some 2D scenes are sized for four ranks.)
+EIGHT_RANK_CHECKS = [f"blocks3d:{name}" for name in ("halo", "refresh", "migrate",
+                                                     "lazy_migration", "rebalance_projection",
+                                                     "empty_rank")] \
+    + [f"blocks:{name}" for name in ("halo", "refresh", "migrate", "lazy_migration")]
+
+
+@pytest.mark.mpi
+def test_blocks_on_eight_ranks(tmp_path):
+    out = tmp_path / "results.json"
+    result = run_mpirun(8, [sys.executable, WORKER, "checks", out] + EIGHT_RANK_CHECKS,
+                        timeout=120)
+    assert result.returncode == 0 and out.exists(), result.stderr[-3000:]
+    results = json.loads(out.read_text())
+    assert sorted(results) == sorted(EIGHT_RANK_CHECKS)
+    failed = {name: message for name, message in results.items() if message}
+    assert not failed, failed
+
+
 @pytest.mark.mpi
 @pytest.mark.parametrize("ranks", [2, 3])
 def test_exception_on_one_rank_aborts_the_job(ranks):
@@ -72,7 +93,7 @@ def test_exception_on_one_rank_aborts_the_job(ranks):
 
 
 def test_pack_round_trip():
-    from parmps.parallel.slabs import pack, unpack_new
+    from parmps.parallel.exchange import pack, unpack_new
     rng = np.random.default_rng(0)
     arrays = [rng.normal(size=7), rng.integers(0, 9, size=(7, 3)).astype(np.int64),
               (rng.normal(size=(7, 2)) > 0), np.arange(7, dtype=np.int8),
@@ -84,3 +105,78 @@ def test_pack_round_trip():
         np.testing.assert_array_equal(copy, original[index])
     empty = unpack_new(pack(arrays, index[:0]), arrays)
     assert [len(a) for a in empty] == [0] * len(arrays)
+
+
+# --- the interface, the registry and the choice of decomposition (no MPI job) ----------------
+
+def _case(lower, upper, **parallel):
+    """A validated case with the given domain (2D or 3D)."""
+    from parmps import schema
+    return schema.validate({"domain": {"lower": list(lower), "upper": list(upper)},
+                            "particles": {"spacing": 1.0}, "time": {"end": 1.0},
+                            "parallel": parallel})
+
+
+def test_every_registered_decomposition_implements_the_interface():
+    from mpi4py import MPI
+    from parmps.parallel import DECOMPOSITIONS, decomposition_class
+    from parmps.parallel.base import Decomposition
+    assert set(DECOMPOSITIONS) >= {"slabs", "blocks"}
+    for name in DECOMPOSITIONS:
+        cls = decomposition_class(name)
+        assert issubclass(cls, Decomposition) and cls.name == name
+        assert not cls.__abstractmethods__, (name, cls.__abstractmethods__)
+        for dimension in (2, 3):
+            made = cls(MPI.COMM_WORLD, _case([0.0] * dimension, [30.0] * dimension))
+            assert made.neighbours == [] and made.describe()
+            lower, upper = made.box(0)
+            assert lower.shape == upper.shape == (dimension,)
+            assert np.all(made.owner(np.zeros((5, dimension))) == 0)
+            with pytest.raises(ValueError, match="shape"):
+                made.owner(np.zeros(5))  # x alone is not a position
+
+
+@pytest.mark.parametrize("ranks, lower, upper, expected", [
+    (4, [0, 0], [30, 30], (2, 2)),        # square: the balanced grid
+    (4, [0, 0], [120, 30], (4, 1)),       # a channel: Dims_create's 2 x 2 would cost more
+    (4, [0, 0], [30, 120], (1, 4)),
+    (8, [0, 0, 0], [30, 30, 30], (2, 2, 2)),
+    (6, [0, 0], [30, 10], (6, 1)),        # 10 m holds two blocks across y, 6 x 1 is cheaper
+    (12, [0, 0], [40, 10], (6, 2)),       # 40 m holds only ten slabs
+])
+def test_the_grid_follows_the_domain(ranks, lower, upper, expected):
+    from parmps.parallel.grid import choose_grid
+    assert choose_grid(ranks, lower, upper, 3.7, 3.7) == expected
+
+
+def test_no_grid_fits_more_ranks_than_the_halo_allows():
+    from parmps.parallel.grid import choose_grid, factorisations
+    assert sorted(factorisations(6, 2)) == [(1, 6), (2, 3), (3, 2), (6, 1)]
+    assert len(factorisations(8, 3)) == 10
+    assert choose_grid(7, [0, 0], [20, 20], 3.7, 3.7) is None  # 7 is prime, 5 fit per axis
+    assert choose_grid(2, [0, 0], [5, 5], 3.7, 3.7) is None
+
+
+@pytest.mark.parametrize("ranks, upper, expected", [
+    (1, [30, 30], "slabs"),
+    (2, [30, 30], "slabs"),
+    (3, [30, 10], "slabs"),
+    (6, [30, 30], "blocks"),               # 3 x 2 saves over a quarter of the ghosts
+    (8, [30, 30], "blocks"),               # 30 m holds six slabs
+    (8, [30, 30, 30], "blocks"),
+])
+def test_auto_chooses_and_says_why(ranks, upper, expected):
+    from parmps.parallel import choose_decomposition
+    name, why = choose_decomposition(ranks, _case([0.0] * len(upper), upper))
+    assert name == expected and why
+
+
+def test_a_grid_that_does_not_fit_is_refused_in_one_line():
+    from mpi4py import MPI
+    from parmps.errors import CaseError
+    from parmps.parallel import decomposition_class
+    blocks = decomposition_class("blocks")
+    with pytest.raises(CaseError, match="product must be the rank count"):
+        blocks(MPI.COMM_WORLD, _case([0, 0], [30, 30], decomposition="blocks", grid=[2, 2]))
+    made = blocks(MPI.COMM_WORLD, _case([0, 0], [30, 30], decomposition="blocks", grid=[1, 1]))
+    assert made.grid == (1, 1)

@@ -11,7 +11,7 @@ import pytest
 from mpi4py import MPI
 
 from conftest import error_lines, run_parmps
-from parmps import schema
+from parmps import open_result, schema
 from parmps.core.particles import FLUID, SOLID, WALL, Particles
 from parmps.coupling.weak import REACH, WeakCoupling, light_bodies
 from parmps.errors import RunFailure
@@ -28,8 +28,8 @@ TIGHT = ["-pressure_ksp_rtol", "1e-12"]
 
 
 def _diagnostics(path, *names):
-    with h5py.File(path, "r") as handle:
-        return [handle["diagnostics"][name][()] for name in names]
+    with open_result(path) as run:
+        return [run.diagnostics[name] for name in names]
 
 
 def _last_frame_ids(path):
@@ -46,8 +46,8 @@ def spray_run(tmp_path_factory):
 
 def test_spray_is_removed_counted_and_the_run_goes_on(spray_run):
     out, result = spray_run
-    with h5py.File(out / "result.h5", "r") as handle:
-        assert handle.attrs["complete"]
+    with open_result(out) as run:
+        assert run.complete
     step, escaped, fluid = _diagnostics(out / "result.h5", "step", "n_escaped", "n_fluid")
     assert step[-1] == 30
     # Cumulative: one from step 9, both from step 13.

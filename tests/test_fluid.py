@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import validation
+from parmps import open_result, validation
 from parmps.fluid import ppe as pressure
 from parmps.tools import analysis
 from parmps.io.frames import FRAME_FIELDS, read_frames
@@ -135,9 +135,9 @@ def test_petsc_options_reach_the_solver_and_divergence_exits_1(tmp_path):
     assert result.returncode == 1, result.stderr
     (line,) = error_lines(result.stderr)
     assert "pressure solve diverged at step 1" in line and "DIVERGED_MAX_IT" in line
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        assert not handle.attrs["complete"]
-        assert "00000000" in handle["frames"]
+    with open_result(tmp_path) as run:
+        assert not run.complete
+        assert run.frames.steps[0] == 0
 
 
 def test_case_options_apply_and_command_line_wins(tmp_path):
@@ -170,12 +170,11 @@ def test_fixed_dt_beyond_courant_stops_with_message_and_keeps_output(tmp_path):
     (line,) = error_lines(result.stderr)
     assert "breaks the Courant limit" in line and "time.fixed_dt" in line
     step = int(line.split("step ")[1].split(":")[0])
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        assert not handle.attrs["complete"]
-        frames = sorted(handle["frames"])
-        assert len(frames) >= 2
-        assert all(int(name) < step for name in frames)
-        assert np.all(np.isfinite(handle["frames"][frames[-1]]["position"][()]))
+    with open_result(tmp_path) as run:
+        assert not run.complete
+        assert len(run.frames) >= 2
+        assert all(run.frames.steps < step)
+        assert np.all(np.isfinite(run.frames[-1].position))
 
 
 def test_dam_break_front_against_martin_moyce(tmp_path):

@@ -1,10 +1,10 @@
 """Run-time guards (issue 6): each failure stops with exit status 1, one message naming the
 step and the cause, and a result file readable up to the last good frame."""
 
-import h5py
 import numpy as np
 import pytest
 
+import parmps
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, schema
 from parmps.run import guards
@@ -25,19 +25,18 @@ def failed_step(result, *phrases):
 
 def assert_readable_up_to(path, step, fields=("position", "velocity")):
     """The file is marked incomplete, every frame precedes the failing step and is finite."""
-    with h5py.File(path, "r") as handle:
-        assert not handle.attrs["complete"]
-        frames = sorted(handle["frames"])
-        assert frames and all(int(name) < step for name in frames)
-        last = handle["frames"][frames[-1]]
+    with parmps.open_result(path) as run:
+        assert not run.complete
+        frames = run.frames
+        assert len(frames) and all(frames.steps < step)
+        last = frames[-1]
         for field in fields:
-            if field in last:
-                assert np.all(np.isfinite(last[field][()]))
+            if field in last.names:
+                assert np.all(np.isfinite(last[field]))
         for name in ("step", "time"):
-            rows = handle["diagnostics"][name][()]
-            assert np.all(np.isfinite(rows))
-        assert handle["diagnostics"]["step"][-1] < step
-        return frames
+            assert np.all(np.isfinite(run.diagnostics[name]))
+        assert run.diagnostics["step"][-1] < step
+        return list(frames.steps)
 
 
 def test_fixed_dt_too_large_stops_at_the_step_with_the_courant_limit(tmp_path):
@@ -64,11 +63,10 @@ def test_blown_up_solid_stops_with_the_body_and_cause(tmp_path):
     step = failed_step(result, "body 'block' blew up", "area constraint lost control")
     assert step > 2
     frames = assert_readable_up_to(tmp_path / "result.h5", step)
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        last = handle["frames"][frames[-1]]["solids"]["block"]["position"][()]
+    with parmps.open_result(tmp_path) as run:
+        last = run.frames.at_step(frames[-1]).bodies["block"]["position"]
         assert np.all(np.isfinite(last))
-        error = handle["solids"]["block"]["volume_error"][()]
-        assert np.all(np.abs(error) <= VOLUME_ERROR_LIMIT)
+        assert np.all(np.abs(run.bodies["block"].volume_error) <= VOLUME_ERROR_LIMIT)
 
 
 def test_fluid_through_a_wall_stops_with_the_particle_and_wall(tmp_path):

@@ -10,9 +10,9 @@ scheme with the default free surface) on 2 ranks to just past the mean window
 
 import math
 
-import h5py
 import pytest
 
+import parmps
 from conftest import run_parmps
 from parmps import validation
 from parmps.tools import analysis
@@ -32,8 +32,8 @@ def test_wall_pressure_against_the_experiment_on_two_ranks(tmp_path):
                          "--set", "output.frames=false"], ranks=2, timeout=900)
     assert result.returncode == 0, result.stderr
     path = tmp_path / "result.h5"
-    with h5py.File(path, "r") as handle:
-        assert handle.attrs["complete"]
+    with parmps.open_result(path) as run:
+        assert run.complete
     measured = CHECK.measure(path)
     tolerance = CHECK.tolerance
     misses = []

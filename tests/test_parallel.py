@@ -6,19 +6,19 @@
   of validation/hydrostatic, like one rank.
 - The dam break on 3 ranks keeps the largest rank within 110 % of the mean
   particle count at every step while the water runs across the tank.
-- A decomposition that cannot work is refused with exit status 2 and one line.
+- A decomposition that cannot work (slabs or blocks) is refused with exit status 2 and
+  one line.
 - An exception on one rank ends the whole job within seconds, never a hang.
 """
 
 import time
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, run_parmps, run_python
-from parmps import validation
+from parmps import open_result, validation
 from parmps.tools import analysis
 
 HYDROSTATIC = validation.load("hydrostatic")
@@ -35,11 +35,9 @@ FIFTY_STEPS = COARSE + ["--set", "time.fixed_dt=0.001", "--end-time", "0.05",
 
 def _frame(path, step):
     """(id, position, pressure) of a frame, sorted by id."""
-    with h5py.File(path, "r") as handle:
-        group = handle["frames"][f"{step:08d}"]
-        ids = group["id"][()]
-        order = np.argsort(ids)
-        return ids[order], group["position"][()][order], group["pressure"][()][order]
+    with open_result(path) as run:
+        frame = run.frames.at_step(step)                 # sorted by id
+        return frame.id, frame.position, frame.pressure
 
 
 @pytest.fixture(scope="module")
@@ -94,9 +92,9 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
     result = run_parmps([CASES / "dam_break.toml", "-o", tmp_path, "--end-time", "0.35",
                          "--set", "output.frames=false"] + COARSE, ranks=3, timeout=240)
     assert result.returncode == 0, result.stderr
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        imbalance = handle["diagnostics"]["imbalance"][()]
-        time = handle["diagnostics"]["time"][()]
+    with open_result(tmp_path) as run:
+        imbalance = run.diagnostics["imbalance"]
+        time = run.diagnostics["time"]
     assert time[-1] == pytest.approx(0.35)
     worst = int(np.argmax(imbalance))
     assert imbalance.max() <= 1.10, f"imbalance {imbalance.max():.4f} at t = {time[worst]:.4f}"
@@ -105,10 +103,11 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
 
 @pytest.mark.mpi
 def test_more_ranks_than_the_domain_holds_exits_2(tmp_path):
-    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab.
+    # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab ("auto" would take
+    # a 1 x 2 grid of blocks).
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
-                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0"],
-                        ranks=2, timeout=60)
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=slabs"], ranks=2, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
@@ -122,11 +121,31 @@ def test_slabs_thinner_than_the_halo_exit_2(tmp_path):
     result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
                          "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
                          "--set", "domain.lower=[-1.0, -0.1]",
-                         "--set", "domain.upper=[1.26, 0.4]"], ranks=3, timeout=60)
+                         "--set", "domain.upper=[1.26, 0.4]",
+                         "--set", "parallel.decomposition=slabs"], ranks=3, timeout=60)
     assert result.returncode == 2, result.stderr
     lines = error_lines(result.stderr)
     assert len(lines) == 1, result.stderr
     assert "thinner than the halo" in lines[0] and "rank 1" in lines[0]
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("grid, words", [
+    ([], "no grid of 3 ranks fits"),
+    ([3, 1], "cuts x into 3 blocks"),
+    ([2, 2], "product must be the rank count"),
+])
+def test_blocks_too_fine_for_the_halo_exit_2(tmp_path, grid, words):
+    # The 0.162 m halo in the 0.32 x 0.42 m tank leaves room for one block along x and two
+    # along y: no grid of 3 ranks.
+    result = run_parmps([CASES / "hydrostatic.toml", "-o", tmp_path, "--end-time", "0.01",
+                         "--set", "particles.spacing=0.02", "--set", "parallel.halo_skin=5.0",
+                         "--set", "parallel.decomposition=blocks",
+                         "--set", f"parallel.grid={grid}"], ranks=3, timeout=60)
+    assert result.returncode == 2, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1, result.stderr
+    assert words in lines[0], lines[0]
 
 
 @pytest.mark.mpi

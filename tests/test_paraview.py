@@ -68,9 +68,10 @@ def run_case(case, out):
 
 @pytest.fixture(scope="module")
 def paraview(tmp_path_factory):
-    """Per result (fluid-only, coupled, changing count): ParaView's counts and drawn pixels.
+    """Per result (fluid-only, coupled, changing count, 3D): ParaView's counts and drawn
+    pixels.
 
-    One pvbatch run renders all three: ParaView's start-up takes seconds.
+    One pvbatch run renders them all: ParaView's start-up takes seconds.
     """
     if shutil.which("pvbatch") is None or not (os.environ.get("DISPLAY")
                                                or shutil.which("Xvfb")):
@@ -78,7 +79,8 @@ def paraview(tmp_path_factory):
     base = tmp_path_factory.mktemp("paraview")
     results = {"fluid": run_case("hydrostatic.toml", base / "fluid"),
                "coupled": run_case("membrane_tube.toml", base / "coupled"),
-               "growing": base / "growing"}
+               "growing": base / "growing",
+               "fluid_3d": run_case("hydrostatic_3d.toml", base / "fluid_3d")}
     results["growing"].mkdir()
     write_growing_result(results["growing"])
     summary = base / "summary.json"
@@ -152,3 +154,18 @@ def test_paraview_follows_a_changing_particle_count(paraview):
     (first,), (last,) = view["first"], view["last"]
     check_particles(first, 3)
     check_particles(last, 4)
+
+
+def test_paraview_draws_a_3d_result(paraview):
+    view = paraview["fluid_3d"]
+    sizes = view["sizes"]
+    assert len(view["times"]) == len(sizes) >= 2
+    (first,), (last,) = view["first"], view["last"]
+    check_particles(first, sizes[0])
+    check_particles(last, sizes[-1])
+    with h5py.File(Path(view["xdmf"]).parent / "result.h5", "r") as handle:
+        frame = handle["frames"][sorted(handle["frames"])[-1]]
+        assert frame["position"].shape == (sizes[-1], 3)
+    # The default view looks at the tank from one side: the dots of its nearest wall
+    # and of the water cover a good share of the picture.
+    assert view["drawn"] >= 2000

@@ -55,7 +55,7 @@ def test_inconsistent_shapes_are_refused():
 
 
 def test_3d_particles_pack_in_field_order():
-    from parmps.parallel.slabs import pack, unpack_new
+    from parmps.parallel.exchange import pack, unpack_new
     particles = make(6, 3)
     arrays = [particles.arrays[name] for name in FIELDS]
     index = np.array([4, 0, 2])

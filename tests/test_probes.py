@@ -18,13 +18,12 @@ Lobovsky case's set-up, and the same values on 1, 2 and 3 ranks.
 import csv
 import math
 
-import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import config, schema, validation
+from parmps import config, open_result, schema, validation
 from parmps.core import scene
 from parmps.core.particles import FLUID, WALL
 from parmps.errors import CaseError
@@ -174,7 +173,7 @@ BAD_PROBES = {
                      "probe[0] 'a'.line must be vertical"),
     "outside": ('name = "a"\nkind = "pressure"\nposition = [5.0, 0.1]', "outside the domain"),
     "force without target": ('name = "a"\nkind = "force"',
-                             "probe[0] 'a' needs exactly one of 'segment' and 'body'"),
+                             "probe[0] 'a' needs exactly one of 'segment', 'wall_box' and 'body'"),
     "force on no body": ('name = "a"\nkind = "force"\nbody = "gate"', "'gate' is not a body"),
     "segment without normal": ('name = "a"\nkind = "force"\nsegment = [[0.2, 0.0], [0.2, 0.2]]',
                                "missing key 'probe[0] 'a'.normal'"),
@@ -308,8 +307,8 @@ def test_still_tank_probes_read_hydrostatics(still_tank):
     assert rows[0] == ["time", "value"]
     t, p = analysis.read_probe(result, "quarter")
     np.testing.assert_array_equal(np.array(rows[1:], float), np.column_stack([t, p]))
-    with h5py.File(result, "r") as handle:
-        attrs = handle["probes"]["wall_quarter"].attrs
+    with open_result(result) as run:
+        attrs = run.probes["wall_quarter"].attrs
         assert attrs["kind"] == "pressure" and attrs["units"] == "Pa"
         assert list(attrs["position"]) == [0.2, 0.05]
 
@@ -340,9 +339,8 @@ FIFTY_STEPS = ["--set", "particles.spacing=0.01", "--set", "time.fixed_dt=0.001"
 
 
 def _probe_values(path):
-    with h5py.File(path, "r") as handle:
-        return {name: (group["time"][()], group["value"][()])
-                for name, group in handle["probes"].items()}
+    with open_result(path) as run:
+        return {name: (probe.time, probe.value) for name, probe in run.probes.items()}
 
 
 @pytest.fixture(scope="module")
@@ -400,8 +398,8 @@ body = "block"
                         timeout=300)
     assert result.returncode == 0, result.stderr
     t, force = analysis.read_probe(out / "result.h5", "block_force")
-    with h5py.File(out / "result.h5", "r") as handle:
-        body = handle["solids"]["block"]
-        np.testing.assert_array_equal(t, body["time"][()])
-        np.testing.assert_array_equal(force, body["fluid_force"][()])
+    with open_result(out) as run:
+        body = run.bodies["block"]
+        np.testing.assert_array_equal(t, body.time)
+        np.testing.assert_array_equal(force, body.fluid_force)
     assert force.shape == (len(t), 2) and np.any(force[:, 1] > 0)

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, error_lines, mpi_environment, run_parmps
+from parmps import open_result
 from parmps.io.frames import read_frame, read_frames
 from parmps.parallel.mpi import launch_environment, mpirun_command
 
@@ -34,6 +35,10 @@ SCENES = {
                       0.1, 0.2, 1, 2),
     "dam_break": ("dam_break.toml", ["--set", "particles.spacing=0.01",
                                      "--set", "time.output_interval=0.025"], 0.05, 0.1, 2, 1),
+    # SPHERIC's 3D dam break at 0.55/5 m (about 5k particles), 2 ranks, then 3.
+    "dam_break_3d": ("dam_break_3d.toml", ["--set", "particles.spacing=0.11",
+                                           "--set", "time.output_interval=0.02"],
+                     0.03, 0.06, 2, 3),
 }
 
 
@@ -51,10 +56,9 @@ def _domain_size(case_file):
 
 
 def _series_steps(path):
-    with h5py.File(path, "r") as handle:
-        steps = handle["diagnostics/step"][()]
-        bodies = {name: handle[f"solids/{name}/time"][()] for name in handle.get("solids", {})}
-        return steps, bodies, bool(handle.attrs["complete"])
+    with open_result(path) as run:
+        bodies = {name: body.time for name, body in run.bodies.items()}
+        return run.diagnostics["step"], bodies, run.complete
 
 
 @pytest.mark.parametrize("scene", sorted(SCENES))
@@ -87,6 +91,28 @@ def test_restart_on_another_rank_count_follows_the_uninterrupted_run(scene, tmp_
         np.testing.assert_allclose(bodies_split[name], times, rtol=1e-12)
     text = (split / "result.xdmf").read_text()
     assert text.count('<Grid Name="step ') == len(steps)
+
+
+@pytest.mark.mpi
+def test_a_checkpoint_written_on_slabs_continues_on_blocks(tmp_path):
+    """parallel.decomposition = "auto" runs the dam break's tank as slabs on 2 ranks and as
+    a 2 x 2 grid of blocks on 4 (their modelled ghosts: 23 % and 14 %): the checkpoint of
+    the slabs continues on the blocks and follows the uninterrupted run to 1e-9 of the
+    domain's size, particle by particle."""
+    case = str(CASES / "dam_break.toml")
+    extra = ["--set", "particles.spacing=0.01", "--set", "time.fixed_dt=0.001",
+             "--set", "time.output_interval=0.01"]
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    _run([case, "-o", whole, "--end-time", "0.04"] + extra, 2)
+    first = _run([case, "-o", split, "--end-time", "0.02"] + extra, 2)
+    assert "decomposition: slabs" in first.stderr
+    second = _run(["--restart", split, "--end-time", "0.04"], 4)
+    assert "decomposition: blocks, 2 x 2 blocks" in second.stderr
+    last, reference = read_frame(split / "result.h5"), read_frame(whole / "result.h5")
+    assert last["step"] == reference["step"] == 40
+    np.testing.assert_array_equal(last["id"], reference["id"])
+    difference = np.abs(last["position"] - reference["position"]).max()
+    assert difference < 1e-9 * _domain_size("dam_break.toml"), difference
 
 
 def test_solid_only_restart_and_refusals(tmp_path):
@@ -162,8 +188,8 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     assert process.returncode != 0, text
     assert seconds < 30
     assert "--restart" in text and "interrupted" in text, text
-    with h5py.File(output / "result.h5", "r") as handle:
-        assert not handle.attrs["complete"]
+    with open_result(output) as run:
+        assert not run.complete
     frames = read_frames(output / "result.h5")
     assert frames and frames[0]["step"] == 0
     with h5py.File(output / "checkpoint.h5", "r") as handle:
@@ -173,9 +199,9 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     end = stopped + 0.02
     result = run_parmps(["--restart", output, "--end-time", end], ranks=2, timeout=300)
     assert result.returncode == 0, result.stderr[-3000:]
-    with h5py.File(output / "result.h5", "r") as handle:
-        assert handle.attrs["complete"]
-        steps = handle["diagnostics/step"][()]
+    with open_result(output) as run:
+        assert run.complete
+        steps = run.diagnostics["step"]
     np.testing.assert_array_equal(steps, np.arange(1, len(steps) + 1))
     frames = read_frames(output / "result.h5")
     assert frames[-1]["time"] == pytest.approx(end)
@@ -195,8 +221,8 @@ def test_probes_go_on_after_a_restart_without_repeating_rows(tmp_path):
     assert result.returncode == 0, result.stderr
     rows = {}
     for name, out in (("whole", whole), ("split", split)):
-        with h5py.File(out / "result.h5", "r") as handle:
-            rows[name] = (handle["probes/bottom/time"][()], handle["probes/bottom/value"][()])
+        with open_result(out) as run:
+            rows[name] = (run.probes["bottom"].time, run.probes["bottom"].value)
         table = np.loadtxt(out / "probes" / "bottom.csv", delimiter=",", comments="#",
                            skiprows=2)
         np.testing.assert_array_equal(table[:, 0], rows[name][0])

@@ -6,11 +6,10 @@ import subprocess
 import sys
 import xml.etree.ElementTree as ElementTree
 
-import h5py
 import numpy as np
 import pytest
 
-from parmps import validation
+from parmps import open_result, validation
 from test_solid import BAD_BODIES, BASE
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -47,27 +46,24 @@ def test_solid_only_case_runs_without_petsc(solid_run):
 def test_solid_output_layout(solid_run):
     result, out = solid_run
     assert result.returncode == 0, result.stderr
-    with h5py.File(out / "result.h5", "r") as handle:
-        assert handle.attrs["complete"]
-        body = handle["solids/block"]
-        steps = len(handle["diagnostics/step"])
+    with open_result(out) as run:
+        assert run.complete
+        body = run.bodies["block"]
+        steps = len(run.diagnostics["step"])
         assert steps == 200
         for name, shape in (("time", (steps,)), ("volume_error", (steps,)),
                             ("fluid_force", (steps, 2)), ("centroid", (steps, 2))):
             assert body[name].shape == shape, name
-        assert np.allclose(body["time"][()], handle["diagnostics/time"][()])
-        assert np.all(body["fluid_force"][()] == 0.0)
+        assert np.allclose(body.time, run.diagnostics.time)
+        assert np.all(body.fluid_force == 0.0)
         tolerance = validation.load("mass_spring_7x7").tolerance["volume_error"]
-        assert np.max(np.abs(body["volume_error"][()])) < tolerance
-        springs = body["springs"][()]
-        assert springs.shape == (156, 2) and springs.dtype.kind == "i"
-        last = sorted(handle["frames"])[-1]
-        frame = handle["frames"][last]
-        assert frame["solids/block/position"].shape == (49, 2)
-        assert frame["solids/block/velocity"].shape == (49, 2)
-        assert np.all(frame["kind"][()] == 3)
-        assert np.allclose(frame["solids/block/position"][()][:, 1].max(),
-                           frame["position"][()][:, 1].max())
+        assert np.max(np.abs(body.volume_error)) < tolerance
+        assert body.springs.shape == (156, 2) and body.springs.dtype.kind == "i"
+        frame = run.frames[-1]
+        nodes = frame.bodies["block"]
+        assert nodes["position"].shape == (49, 2) and nodes["velocity"].shape == (49, 2)
+        assert np.all(frame.kind == 3)
+        assert np.allclose(nodes["position"][:, 1].max(), frame.position[:, 1].max())
     xdmf = ElementTree.parse(out / "result.xdmf").getroot()
     polylines = [t for t in xdmf.iter("Topology") if t.get("TopologyType") == "Polyline"]
     assert polylines and all(t.get("NodesPerElement") == "2" for t in polylines)

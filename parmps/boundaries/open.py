@@ -1,7 +1,8 @@
 """Open boundaries: inflow buffer zones and outlets (docs/design.md §1.7, kind 4).
 
-Inlet. A rectangle of ``m`` lattice columns (across the flow) of inflow-buffer
-particles that move rigidly at the uniform velocity U0 (along x or y). Column
+Inlet. A box of ``m`` lattice columns (cross-sections of the flow: lines in
+2D, rectangles in 3D) of inflow-buffer particles that move rigidly at the
+uniform velocity U0 (along one axis). Column
 ``c`` of inlet ``j`` sits at the distance ``s_c(t) = (m - c - 1/2) l0 + |U0| t``
 downstream of the upstream face: columns 0..m-1 fill the buffer at t = 0, and
 column ``c >= m`` enters at the upstream face once ``s_c(t) >= 0``. Particle
@@ -38,12 +39,19 @@ from mpi4py import MPI
 from parmps.errors import CaseError
 from parmps.fluid.participant import Participant
 from parmps.core.particles import FLUID, INFLOW, Particles
-from parmps.core.scene import lattice_count
+from parmps.core.geometry import format_point
+from parmps.core.scene import lattice_count, lattice_points
 
 log = logging.getLogger(__name__)
 
 ID_STRIDE = 2 ** 40  # ids reserved per inlet
-SIDES = {"left": (0, -1), "right": (0, 1), "bottom": (1, -1), "top": (1, 1)}
+
+
+def side_of(name, dimension):
+    """``(axis, sign)`` of a domain side: left/right along x, front/back along y (3D),
+    bottom/top along the vertical, the last axis."""
+    return {"left": (0, -1), "right": (0, 1), "front": (1, -1), "back": (1, 1),
+            "bottom": (dimension - 1, -1), "top": (dimension - 1, 1)}[name]
 
 
 class Inlet:
@@ -57,10 +65,11 @@ class Inlet:
         nonzero = np.flatnonzero(velocity != 0.0)
         if len(nonzero) != 1:
             raise CaseError(f"{self.name}.velocity {list(velocity)} must be non-zero and along "
-                            f"x or y (one component zero)")
+                            f"one axis (every other component zero)")
         self.velocity = velocity
         self.axis = int(nonzero[0])
-        self.cross = 1 - self.axis
+        # The axes across the flow: a column is a lattice over them.
+        self.cross = [a for a in range(len(velocity)) if a != self.axis]
         self.sign = 1.0 if velocity[self.axis] > 0 else -1.0
         self.speed = abs(float(velocity[self.axis]))
         lower = np.asarray(spec["lower"], dtype=float)
@@ -68,9 +77,10 @@ class Inlet:
         domain_lower = np.asarray(case["domain"]["lower"])
         domain_upper = np.asarray(case["domain"]["upper"])
         if np.any(lower < domain_lower - 1e-12) or np.any(upper > domain_upper + 1e-12):
-            raise CaseError(f"{self.name} [{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, "
-                            f"{upper[1]:g}] is outside the domain [{domain_lower[0]:g}, "
-                            f"{domain_lower[1]:g}]-[{domain_upper[0]:g}, {domain_upper[1]:g}]")
+            raise CaseError(f"{self.name} {format_point(lower, 'g', '[]')}-"
+                            f"{format_point(upper, 'g', '[]')} is outside the domain "
+                            f"{format_point(domain_lower, 'g', '[]')}-"
+                            f"{format_point(domain_upper, 'g', '[]')}")
         self.columns = lattice_count(f"{self.name} depth along the flow",
                               upper[self.axis] - lower[self.axis], spacing)
         needed = int(np.ceil(case["mps"]["re_laplacian"]))
@@ -78,11 +88,13 @@ class Inlet:
             raise CaseError(f"{self.name} is {self.columns} particles deep along the flow; it "
                             f"needs at least {needed} (mps.re_laplacian) so the fluid next to "
                             f"it has a full neighbourhood")
-        self.count = lattice_count(f"{self.name} width across the flow",
-                            upper[self.cross] - lower[self.cross], spacing)
+        counts = [lattice_count(f"{self.name} width across the flow",
+                                upper[a] - lower[a], spacing) for a in self.cross]
         self.depth = self.columns * spacing
         self.upstream = lower[self.axis] if self.sign > 0 else upper[self.axis]
-        self.across = lower[self.cross] + (np.arange(self.count) + 0.5) * spacing
+        # One column's cross-section (count × (d - 1)): the lattice across the flow.
+        self.across = lattice_points(lower[self.cross], counts, spacing)
+        self.count = len(self.across)
         self.base = int(base)
         self.created = self.columns  # columns 0..created-1 exist
 
@@ -93,7 +105,7 @@ class Inlet:
     def _positions(self, column, time):
         """Positions of the particles of the given columns (arrays of equal length)."""
         s = self.distance(column, time)
-        position = np.empty((len(column), 2))
+        position = np.empty((len(column), len(self.velocity)))
         position[:, self.axis] = self.upstream + self.sign * s
         return position, s
 
@@ -150,7 +162,7 @@ class OpenBoundaries(Participant):
         self.comm = comm
         self.inlets = [Inlet(spec, j, case, j * ID_STRIDE)
                        for j, spec in enumerate(case["inlet"])]
-        self.outlets = [SIDES[spec["side"]] for spec in case["outlet"]]
+        self.outlets = [side_of(spec["side"], case["dimension"]) for spec in case["outlet"]]
         self.lower = np.asarray(case["domain"]["lower"], dtype=float)
         self.upper = np.asarray(case["domain"]["upper"], dtype=float)
         spacing = case["particles"]["spacing"]
@@ -237,7 +249,7 @@ class OpenBoundaries(Participant):
 
     def apply(self, particles, time, owner, dt=0.0):
         """Move the buffers, turn particles that left them into fluid, add entering
-        columns (kept where ``owner(x) == rank``), remove fluid past the outlets.
+        columns (kept where ``owner(position) == rank``), remove fluid past the outlets.
 
         Returns owned-only Particles.
         """
@@ -260,7 +272,7 @@ class OpenBoundaries(Participant):
             columns = inlet.new_columns(time)
             if len(columns):
                 entering = inlet.particles(columns, time)
-                keep = np.flatnonzero(owner(entering.position[:, 0]) == comm.rank)
+                keep = np.flatnonzero(owner(entering.position) == comm.rank)
                 parts.append(entering.select(keep))
         result = Particles.concatenate(parts) if len(parts) > 1 else parts[0]
         counts = np.array([converted, removed], np.int64)

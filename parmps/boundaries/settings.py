@@ -2,7 +2,7 @@
 
 import math
 
-from parmps.config import Key, Section, check_ordered_box
+from parmps.config import ZERO, Key, PerDimension, Section, check_ordered_box
 from parmps.errors import CaseError
 
 # Prescribed motion of a tank or wall box (parmps.boundaries.walls): its wall and dummy
@@ -10,7 +10,7 @@ from parmps.errors import CaseError
 # "Never stops" is the default move_end, infinity; a case file cannot write
 # it (numbers must be finite), it leaves the key out.
 MOTION_KEYS = {
-    "velocity": Key("vec2", [0.0, 0.0],
+    "velocity": Key("vector", ZERO,
                     doc="constant velocity of the whole geometry, walls and dummies [m/s]; "
                         "[0, 0]: fixed"),
     "move_start": Key("float", 0.0, ge=0.0, doc="time the motion starts [s]"),
@@ -22,32 +22,40 @@ WALL_SECTIONS = ("tank", "wall_box")
 
 SECTIONS = {
     "tank": Section({
-        "lower": Key("vec2", doc="inner lower-left corner (the wall surface)"),
-        "upper": Key("vec2", doc="inner upper-right corner; the side walls end at its y"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
-        "dummy_layers": Key("int", 2, ge=0, le=10),
-        "open_top": Key("bool", True),
+        "lower": Key("vector", doc="inner lower corner (the wall surface)"),
+        "upper": Key("vector", doc="inner upper corner; the side walls end at its height "
+                                   "(y in 2D, z in 3D)"),
+        "wall_layers": Key("int", 2, ge=1, le=10, doc="layers of wall particles (in the PPE)"),
+        "dummy_layers": Key("int", 2, ge=0, le=10,
+                            doc="layers of dummy particles behind the walls (number density "
+                                "only)"),
+        "open_top": Key("bool", True, doc="no wall along the top (false: a closed box)"),
         **MOTION_KEYS,
-    }, many=True, doc="walls around a rectangle, with dummy layers behind them; they may "
+    }, many=True, doc="walls around a box (a floor and side walls; a roof unless open_top), "
+                      "with dummy layers behind them; they may "
                       "translate at a constant velocity (see MOTION_KEYS)"),
     "wall_box": Section({
-        "lower": Key("vec2"),
-        "upper": Key("vec2"),
-        "wall_layers": Key("int", 2, ge=1, le=10),
+        "lower": Key("vector", doc="lower corner of the obstacle's surface [m]"),
+        "upper": Key("vector", doc="upper corner of the obstacle's surface [m]"),
+        "wall_layers": Key("int", 2, ge=1, le=10,
+                           doc="layers of wall particles inside its surface (dummies fill "
+                               "the rest)"),
         **MOTION_KEYS,
     }, many=True, doc="a solid rectangular obstacle: wall layers outside, dummies inside; "
                       "it may translate at a constant velocity (see MOTION_KEYS)"),
     "inlet": Section({
-        "lower": Key("vec2", doc="lower-left corner of the buffer zone"),
-        "upper": Key("vec2", doc="upper-right corner of the buffer zone"),
-        "velocity": Key("vec2", doc="uniform inflow velocity U0, along x or y [m/s]"),
+        "lower": Key("vector", doc="lower-left corner of the buffer zone"),
+        "upper": Key("vector", doc="upper-right corner of the buffer zone"),
+        "velocity": Key("vector", doc="uniform inflow velocity U0, along one axis [m/s]"),
     }, many=True, doc="an inflow buffer zone: lattice columns of inflow particles moving at "
                       "U0; new columns enter at its upstream face, particles leaving its "
                       "downstream face become fluid"),
     "outlet": Section({
-        "side": Key("str", choices=("left", "right", "bottom", "top"),
-                    doc="the domain side through which fluid leaves and is removed"),
-        "velocity": Key("vec2", [0.0, 0.0],
+        "side": Key("str", choices=("left", "right", "front", "back", "bottom", "top"),
+                    doc="the domain side through which fluid leaves and is removed: left "
+                        "and right along x, front and back along y (3D only), bottom and top "
+                        "along the vertical (y in 2D, z in 3D)"),
+        "velocity": Key("vector", ZERO,
                         doc="[0, 0]: plain removal; else fluid within `buffer` layers of "
                             "the side becomes an outflow buffer moving at this velocity"),
         "buffer": Key("int", 4, ge=1, le=20, doc="outflow buffer depth, in particles"),
@@ -59,6 +67,10 @@ SECTIONS = {
 
 
 def check(case):
+    for k, outlet in enumerate(case["outlet"]):
+        if case["dimension"] == 2 and outlet["side"] in ("front", "back"):
+            raise CaseError(f"outlet[{k}].side '{outlet['side']}' is a side of a 3D domain; "
+                            f"a 2D one has left, right, bottom and top")
     for kind in (*WALL_SECTIONS, "inlet"):
         for k, item in enumerate(case[kind]):
             check_ordered_box(f"{kind}[{k}]", item)

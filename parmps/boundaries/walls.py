@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from parmps.core.geometry import format_point
 from parmps.errors import CaseError
 from parmps.fluid.participant import Participant
 
@@ -85,7 +86,7 @@ class MovingWalls(Participant):
         for _, spec, low, high in self.walls:
             moving = spec["move_start"] <= time < spec["move_end"]
             particles.velocity[:n][self._members(particles, low, high)] = \
-                spec["velocity"] if moving else (0.0, 0.0)
+                spec["velocity"] if moving else 0.0
 
     def advance(self, particles, time, dt):
         """Move the owned particles of each wall from d(time) to d(time + dt), in place.
@@ -140,7 +141,7 @@ class MovingWalls(Participant):
                 until = "the end time" if stop == end_time else f"{name}.move_end"
                 raise CaseError(
                     f"{name} moves out of the domain: at {name}.velocity = "
-                    f"[{velocity[0]:g}, {velocity[1]:g}] m/s its particles leave "
-                    f"[{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, {upper[1]:g}] at "
+                    f"{format_point(velocity, 'g', '[]')} m/s its particles leave "
+                    f"{format_point(lower, 'g', '[]')}-{format_point(upper, 'g', '[]')} at "
                     f"t = {leave:.6g} s, before {until} ({stop:g} s); stop it earlier "
                     f"({name}.move_end) or enlarge domain.lower/domain.upper")

@@ -21,3 +21,9 @@ def point_in_polygon(points, polygon):
         cross_x = a[None, :, 0] + (y - a[None, :, 1]) * (b[None, :, 0] - a[None, :, 0]) / \
             (b[None, :, 1] - a[None, :, 1])
     return np.count_nonzero(straddle & (x < cross_x), axis=1) % 2 == 1
+
+
+def format_point(point, spec=".6g", brackets="()"):
+    """A point of any dimension for a message: ``(x, y)`` or ``(x, y, z)``."""
+    inner = ", ".join(format(float(c), spec) for c in point)
+    return f"{brackets[0]}{inner}{brackets[1]}"

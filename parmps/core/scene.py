@@ -9,7 +9,7 @@ surface it models, as the fluid's first layer lies half a spacing inside.
 
 import numpy as np
 
-from parmps.core.geometry import outside_box
+from parmps.core.geometry import format_point, outside_box
 from parmps.errors import CaseError
 from parmps.core.neighbours import close_pairs
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
@@ -28,51 +28,68 @@ def lattice_count(name, extent, spacing):
     return rounded
 
 
-def _lattice(lower, nx, ny, spacing, i0=0, j0=0):
-    """Lattice points corner + (i + 1/2, j + 1/2) l0 for i in [i0, i0+nx), j in [j0, j0+ny)."""
-    i = np.arange(i0, i0 + nx)
-    j = np.arange(j0, j0 + ny)
-    ii, jj = np.meshgrid(i, j, indexing="xy")
-    x = lower[0] + (ii.ravel() + 0.5) * spacing
-    y = lower[1] + (jj.ravel() + 0.5) * spacing
-    return np.column_stack([x, y]), ii.ravel(), jj.ravel()
+def _lattice(lower, counts, spacing, first=None):
+    """Lattice points corner + (i + 1/2) l0 for each axis's i in [first, first + count).
+
+    Returns the points (n, d) and their integer lattice indices (n, d), x varying
+    fastest, then y, then z (in 2D the order of the former meshgrid(indexing="xy")).
+    """
+    first = [0] * len(counts) if first is None else first
+    axes = [np.arange(f, f + n) for f, n in zip(first, counts)]
+    grids = np.meshgrid(*axes[::-1], indexing="ij")
+    index = np.column_stack([g.ravel() for g in grids[::-1]])
+    position = np.column_stack([lower[a] + (index[:, a] + 0.5) * spacing
+                                for a in range(len(counts))])
+    return position, index
+
+
+def lattice_points(lower, counts, spacing):
+    """The points ``lower + (i + 1/2) l0`` of a lattice with ``counts`` points per axis."""
+    return _lattice(lower, counts, spacing)[0]
+
+
+def _counts(name, spec, spacing):
+    """Lattice spacings along each axis of the box ``spec`` (lower, upper)."""
+    return [lattice_count(f"{name} {AXIS_EXTENT[a]}", spec["upper"][a] - spec["lower"][a],
+                          spacing) for a in range(len(spec["lower"]))]
+
+
+# What a box's extent along each axis is called in messages.
+AXIS_EXTENT = ("width", "height", "depth")
 
 
 def fluid_block(block, spacing, name):
-    lower = block["lower"]
-    nx = lattice_count(f"{name} width", block["upper"][0] - lower[0], spacing)
-    ny = lattice_count(f"{name} height", block["upper"][1] - lower[1], spacing)
-    position, _, _ = _lattice(lower, nx, ny, spacing)
+    position, _ = _lattice(block["lower"], _counts(name, block, spacing), spacing)
     velocity = np.tile(np.asarray(block["velocity"], dtype=float), (len(position), 1))
     return position, np.full(len(position), FLUID, np.int8), velocity
 
 
 def tank(spec, spacing, name):
-    """Walls on the left, right and bottom of the inner rectangle (and the top if closed)."""
-    lower = spec["lower"]
-    nx = lattice_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
-    ny = lattice_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
+    """Walls on every side of the inner box but the top (the last axis's upper side)
+    when ``open_top``: a floor and side walls, with dummy layers behind them."""
+    counts = _counts(name, spec, spacing)
     layers = spec["wall_layers"] + spec["dummy_layers"]
-    top = ny + (0 if spec["open_top"] else layers)
-    position, ii, jj = _lattice(lower, nx + 2 * layers, top + layers, spacing,
-                                i0=-layers, j0=-layers)
-    # Distance in layers from the inner rectangle (Chebyshev), 0 inside it.
-    depth = np.maximum.reduce([-ii, ii - (nx - 1), -jj, jj - (ny - 1) if not spec["open_top"]
-                               else np.full_like(jj, -1), np.zeros_like(ii)])
+    top = counts[-1] + (0 if spec["open_top"] else layers)
+    position, index = _lattice(spec["lower"], [n + 2 * layers for n in counts[:-1]]
+                               + [top + layers], spacing, first=[-layers] * len(counts))
+    # Distance in layers from the inner box (Chebyshev), 0 inside it.
+    beyond = [np.maximum(-index[:, a], index[:, a] - (n - 1)) for a, n in enumerate(counts)]
+    if spec["open_top"]:
+        beyond[-1] = -index[:, -1]
+    depth = np.maximum.reduce([*beyond, np.zeros(len(index), index.dtype)])
     keep = depth > 0
     kind = np.where(depth[keep] <= spec["wall_layers"], WALL, DUMMY).astype(np.int8)
-    return position[keep], kind, np.zeros((int(keep.sum()), 2))
+    return position[keep], kind, np.zeros((int(keep.sum()), len(counts)))
 
 
 def wall_box(spec, spacing, name):
-    """A filled rectangle: its outer wall_layers are wall particles, the core is dummy."""
-    lower = spec["lower"]
-    nx = lattice_count(f"{name} width", spec["upper"][0] - lower[0], spacing)
-    ny = lattice_count(f"{name} height", spec["upper"][1] - lower[1], spacing)
-    position, ii, jj = _lattice(lower, nx, ny, spacing)
-    depth = np.minimum.reduce([ii, nx - 1 - ii, jj, ny - 1 - jj])
+    """A filled box: its outer wall_layers are wall particles, the core is dummy."""
+    counts = _counts(name, spec, spacing)
+    position, index = _lattice(spec["lower"], counts, spacing)
+    depth = np.minimum.reduce([np.minimum(index[:, a], n - 1 - index[:, a])
+                               for a, n in enumerate(counts)])
     kind = np.where(depth < spec["wall_layers"], WALL, DUMMY).astype(np.int8)
-    return position, kind, np.zeros((len(position), 2))
+    return position, kind, np.zeros((len(position), len(counts)))
 
 
 BUILDERS = {"fluid_block": fluid_block, "tank": tank, "wall_box": wall_box}
@@ -139,11 +156,12 @@ def check_inside_domain(case, particles, origin, sources):
     outside = outside_box(particles.position, lower, upper)
     if outside.any():
         first = int(np.flatnonzero(outside)[0])
-        x, y = particles.position[first]
         raise CaseError(f"{sources[origin[first]]} puts {int(outside.sum())} particles outside "
-                        f"the domain [{lower[0]:g}, {lower[1]:g}]-[{upper[0]:g}, {upper[1]:g}], "
-                        f"e.g. at ({x:.6g}, {y:.6g}) (walls and dummy layers included); "
-                        f"enlarge domain.lower/domain.upper or move the geometry")
+                        f"the domain {format_point(lower, 'g', '[]')}-"
+                        f"{format_point(upper, 'g', '[]')}, "
+                        f"e.g. at {format_point(particles.position[first])} (walls and dummy "
+                        f"layers included); enlarge domain.lower/domain.upper or move the "
+                        f"geometry")
 
 
 def check_overlaps(particles, origin, sources, spacing):
@@ -152,6 +170,5 @@ def check_overlaps(particles, origin, sources, spacing):
     if len(i):
         a, b = sorted((sources[origin[i[0]]], sources[origin[j[0]]]))
         what = f"{a} overlaps {b}" if a != b else f"{a} overlaps itself"
-        x, y = particles.position[i[0]]
         raise CaseError(f"{what}: {len(i)} pairs of particles closer than half a spacing, "
-                        f"e.g. near ({x:.6g}, {y:.6g})")
+                        f"e.g. near {format_point(particles.position[i[0]])}")

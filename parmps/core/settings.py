@@ -1,6 +1,6 @@
 """Case sections of the scene: the domain, the particle lattice, gravity, fluid blocks."""
 
-from parmps.config import Key, Section, check_ordered_box
+from parmps.config import ZERO, Key, PerDimension, Section, check_ordered_box
 from parmps.errors import CaseError
 
 # Sections whose entries are particles on the lattice and so need particles.spacing.
@@ -8,8 +8,8 @@ PARTICLE_SECTIONS = ("fluid_block", "tank", "wall_box", "inlet", "outlet")
 
 SECTIONS = {
     "domain": Section({
-        "lower": Key("vec2", doc="lower-left corner; every particle must start inside"),
-        "upper": Key("vec2", doc="upper-right corner"),
+        "lower": Key("vector", doc="lower-left corner; every particle must start inside"),
+        "upper": Key("vector", doc="upper-right corner"),
         "escaped_fluid": Key("str", "remove", choices=("remove", "stop"),
                              doc="a fluid particle outside the box after a step: \"remove\" "
                                  "drops it and the run goes on (spray thrown over a wall), "
@@ -26,28 +26,42 @@ SECTIONS = {
         "spacing": Key("float", None, gt=0.0,
                        doc="initial particle spacing l0 [m]; needed by any case with fluid "
                            "or walls, not by a solid-only case"),
+        "snap": Key("bool", False,
+                    doc="false: every box (fluid block, tank, wall box, inlet) must span a "
+                        "whole number of spacings; true: each box's corners move to the "
+                        "nearest lines origin + k l0 of one lattice, so a geometry given in "
+                        "metres (a benchmark's) runs at any spacing, each face within half a "
+                        "spacing of where it was given; probes with a normal move onto the "
+                        "face as built"),
+        "origin": Key("vector", ZERO, doc="with snap: a point of the lattice's lines [m]"),
     }),
     "physics": Section({
-        "gravity": Key("vec2", [0.0, -9.81], doc="[m/s^2]"),
+        "gravity": Key("vector", PerDimension(-9.81), doc="[m/s^2]"),
     }),
     "fluid_block": Section({
-        "lower": Key("vec2"),
-        "upper": Key("vec2"),
-        "velocity": Key("vec2", [0.0, 0.0]),
+        "lower": Key("vector", doc="lower corner of the block [m]"),
+        "upper": Key("vector", doc="upper corner of the block [m]"),
+        "velocity": Key("vector", ZERO, doc="initial velocity of its particles [m/s]"),
     }, many=True, doc="a rectangle filled with fluid particles on the l0 lattice"),
 }
+
+
+# The dimensions a case may have.
+DIMENSIONS = (2, 3)
 
 
 def check_dimension(raw):
     """The case's dimension, from the number of components of domain.lower (before validation).
 
-    Only 2D exists so far; a 3D domain is refused with a sentence that says so
-    rather than a complaint about a vector's length.
+    [x, y] makes a 2D case, [x, y, z] a 3D one (z up); every other vector of the
+    case must then have as many components (:class:`parmps.config.Key` "vector").
     """
     lower = raw.get("domain", {}).get("lower") if isinstance(raw.get("domain"), dict) else None
-    if isinstance(lower, list) and len(lower) == 3:
-        raise CaseError("domain.lower has 3 components: parmps runs 2D cases only so far "
-                        "(3D is planned); give [x, y]")
+    if isinstance(lower, list) and len(lower) in DIMENSIONS:
+        return len(lower)
+    if isinstance(lower, list):
+        raise CaseError(f"domain.lower has {len(lower)} components: give [x, y] for a 2D case "
+                        f"or [x, y, z] for a 3D one")
     return 2
 
 
@@ -57,12 +71,34 @@ def check(case):
         raise CaseError(f"missing key 'particles.spacing': the case has "
                         f"[[{particle_sections[0]}]] particles, which need a spacing")
     lower, upper = case["domain"]["lower"], case["domain"]["upper"]
-    for axis, label in enumerate("xy"):
+    for axis, label in enumerate("xyz"[:len(lower)]):
         if not upper[axis] > lower[axis]:
             raise CaseError(f"domain.upper.{label} ({upper[axis]}) must exceed "
                             f"domain.lower.{label} ({lower[axis]})")
+    if case["particles"]["snap"] and case["particles"]["spacing"] is not None:
+        snap_boxes(case)
     for k, block in enumerate(case["fluid_block"]):
         check_ordered_box(f"fluid_block[{k}]", block)
+
+
+# The sections whose entries are boxes of particles (lower, upper corners).
+BOX_SECTIONS = ("fluid_block", "tank", "wall_box", "inlet")
+
+
+def snap_to_lattice(value, case):
+    """``value`` (a coordinate vector) moved to the nearest lattice lines origin + k l0."""
+    spacing = case["particles"]["spacing"]
+    origin = case["particles"]["origin"]
+    return [o + round((v - o) / spacing) * spacing for v, o in zip(value, origin)]
+
+
+def snap_boxes(case):
+    """With particles.snap: every box's corners on the lattice's lines, in place. Two boxes
+    that touched still touch, and each face moves by at most half a spacing."""
+    for name in BOX_SECTIONS:
+        for box in case.get(name, ()):
+            box["lower"] = snap_to_lattice(box["lower"], case)
+            box["upper"] = snap_to_lattice(box["upper"], case)
 
 
 def search_radius(case):

@@ -2,7 +2,7 @@
 
 from parmps.config import Key, Section
 from parmps.errors import CaseError
-from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, registered
+from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, scheme_class
 
 
 def _mps_section():
@@ -25,13 +25,22 @@ def _mps_section():
                             doc="where P = 0: \"extrapolated\" half a spacing beyond the "
                                 "free-surface particles, \"dirichlet\" on them"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
-        "clamp_negative_pressure": Key("bool", True),
-        "collision": Key("bool", True),
+        "clamp_negative_pressure": Key("bool", True,
+                                       doc="negative pressures are set to 0 after the solve"),
+        "collision": Key("bool", True,
+                         doc="the collision model: pairs closer than collision_distance "
+                             "bounce apart"),
         "collision_distance": Key("float", 0.5, gt=0.0, lt=1.0, doc="in l0"),
-        "restitution": Key("float", 0.2, ge=0.0, le=1.0),
+        "restitution": Key("float", 0.2, ge=0.0, le=1.0,
+                           doc="coefficient of restitution of the collision model"),
     }
-    for name, scheme in registered():
-        keys[name] = Key("table", keys=scheme.KEYS, doc=scheme.__doc__ or "")
+    for choice, registry in (("source", SOURCES), ("laplacian", LAPLACIANS),
+                             ("gradient", GRADIENTS), ("free_surface", SURFACES)):
+        for name in registry:
+            scheme = scheme_class(registry, name)
+            keys[name] = Key("table", keys=scheme.KEYS,
+                             doc=f"settings of mps.{choice} = \"{name}\"" +
+                                 (f": {scheme.__doc__}" if scheme.__doc__ else ""))
     replaced = {
         "relaxation": "the density source's gamma is [mps.density] relaxation",
         "source_term": "choose the source with mps.source (\"density\", \"mixed\", ...)",
@@ -52,7 +61,8 @@ SECTIONS = {
     "pressure": Section({
         "rtol": Key("float", 1.0e-6, gt=0.0, lt=1.0,
                     doc="CG stops at this residual relative to the right-hand side"),
-        "max_iterations": Key("int", 1000, gt=0),
+        "max_iterations": Key("int", 1000, gt=0,
+                              doc="most CG iterations of one solve (reaching it: the solve failed)"),
         "reuse_preconditioner": Key("int", 50, ge=0,
                                     doc="most steps a preconditioner set-up is reused for "
                                         "(0: set up every step)"),
@@ -60,8 +70,8 @@ SECTIONS = {
                           doc="what a preconditioner set-up costs, in CG iterations: it is "
                               "set up again once a step's iterations exceed the average "
                               "cost per step since the last set-up"),
-        "ksp_type": Key("str", "cg"),
-        "pc_type": Key("str", "gamg"),
+        "ksp_type": Key("str", "cg", doc="PETSc Krylov method (-pressure_ksp_type)"),
+        "pc_type": Key("str", "gamg", doc="PETSc preconditioner (-pressure_pc_type)"),
         "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),
     }),
 }

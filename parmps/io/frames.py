@@ -103,7 +103,7 @@ def write_by_id(group, particles, fields, comm):
     contiguous block at the offset of an exclusive scan.
     """
     # Here, not at the top: reading frames back must not start MPI.
-    from parmps.parallel.slabs import by_id_blocks
+    from parmps.parallel.exchange import by_id_blocks
     owned, offset, total = by_id_blocks(particles, comm)
     count = owned.n_owned
     for name in fields:
@@ -115,22 +115,17 @@ def write_by_id(group, particles, fields, comm):
 
 
 def read_frame(path, step=None):
-    """One frame of a result file as a dict of arrays sorted by id (the last frame by default)."""
-    import h5py
-    with h5py.File(path, "r") as handle:
-        names = sorted(handle["frames"])
-        return _frame(handle["frames"][names[-1] if step is None else f"{step:08d}"])
+    """One frame of a result file as a dict of arrays sorted by id (the last frame by default).
+    A shorthand of :func:`parmps.open_result`, which reads lazily."""
+    from parmps.result import open_result
+    with open_result(path) as result:
+        frames = result.frames
+        return (frames[-1] if step is None else frames.at_step(step)).as_dict()
 
 
 def read_frames(path):
-    """Every frame of a result file, each a dict of arrays sorted by id."""
-    import h5py
-    with h5py.File(path, "r") as handle:
-        return [_frame(handle["frames"][name]) for name in sorted(handle["frames"])]
-
-
-def _frame(group):
-    order = np.argsort(group["id"][()], kind="stable")
-    data = {field: group[field][()][order] for field in FRAME_FIELDS}
-    data.update({key: group.attrs[key] for key in FRAME_ATTRIBUTES})
-    return data
+    """Every frame of a result file, each a dict of arrays sorted by id (a shorthand of
+    :func:`parmps.open_result`)."""
+    from parmps.result import open_result
+    with open_result(path) as result:
+        return [frame.as_dict() for frame in result.frames]

@@ -1,9 +1,21 @@
 """Case section of the decomposition: halo, load balance, migration."""
 
 from parmps.config import Key, Section
+from parmps.errors import CaseError
+from parmps.parallel import CHOICES
 
 SECTIONS = {
     "parallel": Section({
+        "decomposition": Key("str", "auto", choices=CHOICES,
+                             doc="how the domain is cut over the ranks (parmps.parallel."
+                                 "DECOMPOSITIONS): slabs along x, blocks of a px x py (x pz) "
+                                 "rank grid, or auto: slabs unless they do not fit the halo or "
+                                 "a grid cutting two or more axes models a quarter fewer "
+                                 "ghosts (rank 0 logs the choice and why)"),
+        "grid": Key("ints", [], gt=0,
+                    doc="blocks: the rank grid [px, py] ([px, py, pz] in 3D), whose product "
+                        "is the rank count; empty: the grid with the fewest ghosts for the "
+                        "domain"),
         "halo_skin": Key("float", 0.6, ge=0.0, le=5.0,
                          doc="extra halo width and neighbour-list skin, in l0"),
         "rebalance_interval": Key("int", 20, gt=0, doc="steps between load-balance checks"),
@@ -11,10 +23,13 @@ SECTIONS = {
                                    doc="rebalance when max/mean particles exceeds this"),
         "migration_margin": Key("float", 0.5, ge=0.0, le=5.0,
                                 doc="particles migrate once one is this far (in l0) outside "
-                                    "its slab; halo and slabs widen by it (0: every step)"),
+                                    "its region; halo and regions widen by it (0: every step)"),
     }),
 }
 
 
 def check(case):
-    pass
+    grid = case["parallel"]["grid"]
+    if grid and len(grid) != len(case["domain"]["lower"]):
+        raise CaseError(f"parallel.grid has {len(grid)} entries for a "
+                        f"{len(case['domain']['lower'])}D domain: give one per axis")

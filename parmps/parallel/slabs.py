@@ -1,21 +1,10 @@
 """Domain decomposition into slabs along x: ownership, halo exchange, migration.
 
-The interface the solver uses (all methods are collective over ``comm``):
-
-- ``SlabDecomposition(comm, case)``: the slab layout for a case.
-- ``update(particles, step)``: what a step needs after positions changed:
-  ``migrate``, ``rebalance`` and ``build_halo`` in that order.
-- ``distribute(particles)``: from the global scene (the same on every rank) keep
-  the particles this rank owns.
-- ``migrate(particles)``: drop ghosts, send owned particles that left the slab to
-  their new owner; returns owned-only Particles.
-- ``build_halo(particles)``: append ghosts (copies of neighbours' particles within
-  the halo width of this slab's edges) after the owned ones; remembers what was
-  sent so ``refresh`` can update the same ghosts.
-- ``refresh(particles_or_arrays)``: copy the owners' current values of
-  per-particle arrays (length n_owned + n_ghost) into the ghost slots, in place.
-- ``rebalance(particles, step)``: every few steps move slab edges to the
-  quantiles of x if the load is uneven; returns owned-only Particles.
+:class:`SlabDecomposition` implements the interface of
+:class:`parmps.parallel.base.Decomposition` (``parallel.decomposition =
+"slabs"``); the contract of each method is there. Slabs exchange ghosts with
+two neighbours only, which is cheapest for few ranks; their ghosts grow with
+the cross-section of the domain, not with N/P (blocks.py shrinks them).
 
 Layout. Rank k owns the half-open interval ``[edges[k], edges[k+1])`` of x;
 the first slab extends to -inf and the last to +inf (``edges[0]`` and
@@ -62,8 +51,10 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.errors import CaseError
-from parmps.core.settings import search_radius
 from parmps.core.particles import FIELDS, Particles
+from parmps.parallel.base import Decomposition
+from parmps.parallel.exchange import (field_arrays, imbalance_of, merge_by_id, pack,
+                                      send_to_ranks, sorted_by_id, unpack_into, unpack_new)
 
 log = logging.getLogger(__name__)
 
@@ -77,93 +68,46 @@ _HISTOGRAM_BINS = 1024
 _TAG_COUNT_LEFTWARD, _TAG_COUNT_RIGHTWARD, _TAG_DATA_LEFTWARD, _TAG_DATA_RIGHTWARD = range(701, 705)
 
 
-# --- packing per-particle arrays into bytes ---------------------------------------------------
-
-def _row_bytes(array):
-    return array.dtype.itemsize * int(np.prod(array.shape[1:], dtype=np.int64))
-
-
-def pack(arrays, index):
-    """Rows ``index`` of each array, packed side by side into a (n, row_bytes) uint8 array."""
-    n = len(index)
-    columns = []
-    for array in arrays:
-        rows = np.ascontiguousarray(array[index])
-        per_row = int(np.prod(array.shape[1:], dtype=np.int64))
-        columns.append(rows.reshape(n, per_row).view(np.uint8))
-    if not columns:
-        return np.empty((n, 0), np.uint8)
-    return np.ascontiguousarray(np.concatenate(columns, axis=1))
-
-
-def unpack_into(buffer, arrays, start):
-    """Write the packed rows of ``buffer`` into ``arrays[start:start + len(buffer)]``."""
-    m = len(buffer)
-    offset = 0
-    for array in arrays:
-        width = _row_bytes(array)
-        chunk = np.ascontiguousarray(buffer[:, offset:offset + width])
-        array[start:start + m] = chunk.view(array.dtype).reshape((m,) + array.shape[1:])
-        offset += width
-
-
-def unpack_new(buffer, templates):
-    """New arrays (like ``templates`` in dtype and trailing shape) from packed rows."""
-    m = len(buffer)
-    out = [np.empty((m,) + t.shape[1:], t.dtype) for t in templates]
-    unpack_into(buffer, out, 0)
-    return out
-
-
-def _field_arrays(particles):
-    return [particles.arrays[name] for name in FIELDS]
-
-
 # --- the decomposition -------------------------------------------------------------------------
 
-class SlabDecomposition:
+class SlabDecomposition(Decomposition):
     """Slabs along x, one per rank of ``comm``; see the module docstring."""
 
+    name = "slabs"
+
     def __init__(self, comm, case):
-        self.comm = comm
-        self.size = comm.size
-        self.rank = comm.rank
+        super().__init__(comm, case)
         self.cart = comm.Create_cart([comm.size], periods=[False], reorder=False)
         self.left, self.right = self.cart.Shift(0, 1)
-        spacing = case["particles"]["spacing"]
-        self.spacing = float(spacing)
-        self.reach = search_radius(case)
-        self.margin = float(case["parallel"].get("migration_margin", 0.0)) * spacing
-        self.halo_width = self.reach + self.margin
-        self.min_slab_width = self.reach + 2.0 * self.margin
-        self.lower = float(case["domain"]["lower"][0])
-        self.upper = float(case["domain"]["upper"][0])
-        parallel = case["parallel"]
-        self.rebalance_interval = int(parallel["rebalance_interval"])
-        self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
-        width = self.upper - self.lower
-        # Every slab must be at least one halo wide: the domain holds so many slabs.
-        capacity = max(1, int(np.floor(width / self.min_slab_width * (1 + 1e-12))))
-        if comm.size > capacity:
-            raise CaseError(
-                f"{comm.size} ranks need slabs at least {self.min_slab_width:g} m wide "
-                f"({_WIDTH_RULE}), but the domain "
-                f"is {width:g} m wide along x and holds at most {capacity} such "
-                f"slab{'s' if capacity > 1 else ''}: run on at most {capacity} "
-                f"rank{'s' if capacity > 1 else ''}")
+        self.min_slab_width = self.min_width
+        self.capacity = slab_capacity(self.lower, self.upper, self.min_width)
+        if comm.size > self.capacity:
+            raise CaseError(too_many_slabs(comm.size, self.lower, self.upper, self.min_width))
         # Until distribute: equal widths over the domain.
-        self.edges = np.linspace(self.lower, self.upper, comm.size + 1)
-        self.halo_seconds = 0.0
-        self.migration_seconds = 0.0
-        self.rebalance_count = 0
-        self.migration_count = 0  # migrations that moved particles
-        self._reference = (0, 1.0)  # (step, imbalance) the load drift is measured from
-        self._refused = False  # the last rebalance was refused (thin slabs)
+        self.edges = np.linspace(self.lower[0], self.upper[0], comm.size + 1)
         self._send_left = np.empty(0, np.int64)
         self._send_right = np.empty(0, np.int64)
         self._n_from_left = 0
         self._n_from_right = 0
         self._n_owned = 0
+
+    @property
+    def neighbours(self):
+        """The adjacent slabs' ranks (none past the ends)."""
+        return [r for r in (self.left, self.right) if r != MPI.PROC_NULL]
+
+    def box(self, rank):
+        """(lower, upper) corners of ``rank``'s slab: x between its edges, all y (and z)."""
+        lower = np.full(self.dimension, -np.inf)
+        upper = np.full(self.dimension, np.inf)
+        if rank > 0:
+            lower[0] = self.edges[rank]
+        if rank < self.size - 1:
+            upper[0] = self.edges[rank + 1]
+        return lower, upper
+
+    def describe(self):
+        return f"{self.size} slab{'s' if self.size > 1 else ''} along x"
 
     # -- layout ---------------------------------------------------------------------------------
 
@@ -179,8 +123,12 @@ class SlabDecomposition:
         hi = np.inf if self.rank == self.size - 1 else self.edges[self.rank + 1]
         return lo, hi
 
-    def owner(self, x):
-        """The rank owning each x (half-open slabs; the ends extend to infinity)."""
+    def owner(self, position):
+        """The rank owning each row of ``position`` ((n, d)): its x decides (half-open
+        slabs; the ends extend to infinity)."""
+        return self._owner_x(self._positions(position)[:, 0])
+
+    def _owner_x(self, x):
         return np.searchsorted(self.interior_edges, np.asarray(x, dtype=np.float64),
                                side="right").astype(np.int64)
 
@@ -216,8 +164,8 @@ class SlabDecomposition:
                 f"{rank}'s is {width:g} m wide, thinner than the halo {self.min_slab_width:g} m "
                 f"({_WIDTH_RULE}): run on fewer ranks")
         self.edges = edges
-        keep = np.flatnonzero(self.owner(x) == self.rank)
-        mine = _sorted_by_id(particles.select(keep))
+        keep = np.flatnonzero(self._owner_x(x) == self.rank)
+        mine = sorted_by_id(particles.select(keep))
         total = self.cart.allreduce(mine.n_owned, op=MPI.SUM)
         if total != particles.n_owned:
             raise RuntimeError(f"distribute: ranks hold {total} particles of "
@@ -233,11 +181,11 @@ class SlabDecomposition:
         """Edges (size+1, the outer two the domain bounds) at the gaps nearest the quantiles."""
         n = len(xs)
         edges = np.empty(self.size + 1)
-        edges[0], edges[-1] = self.lower, self.upper
+        edges[0], edges[-1] = self.lower[0], self.upper[0]
         if self.size == 1:
             return edges
         if n < 2:
-            edges[1:-1] = np.linspace(self.lower, self.upper, self.size + 1)[1:-1]
+            edges[1:-1] = np.linspace(self.lower[0], self.upper[0], self.size + 1)[1:-1]
             return edges
         # Gaps: split positions k (0 < k < n) where xs[k-1] < xs[k].
         gaps = np.flatnonzero(xs[1:] > xs[:-1]) + 1
@@ -251,15 +199,6 @@ class SlabDecomposition:
             k = min(candidates, key=lambda g: (abs(g - target), g))
             edges[i] = 0.5 * (xs[k - 1] + xs[k])
         return edges
-
-    # -- the per-step update ------------------------------------------------------------------
-
-    def update(self, particles, step):
-        """Everything positions changed since the last step: migrate, rebalance when due,
-        then rebuild the halo. Returns owned particles followed by current ghosts."""
-        particles = self.migrate(particles)
-        particles = self.rebalance(particles, step)
-        return self.build_halo(particles)
 
     # -- migration ------------------------------------------------------------------------------
 
@@ -282,9 +221,9 @@ class SlabDecomposition:
         if self.size == 1:
             result = particles.owned() if particles.n_ghost else particles
             self._clear_halo(result.n_owned)
-            return _sorted_by_id(result)
+            return sorted_by_id(result)
         x = particles.position[:n, 0]
-        owner = self.owner(x)
+        owner = self._owner_x(x)
         stay = owner == self.rank
         leaving = np.flatnonzero(~stay)
         # [farthest jump in slabs, a particle past the margin] over all ranks.
@@ -305,20 +244,20 @@ class SlabDecomposition:
         else:
             result = self._migrate_all(particles, owner)
         self._clear_halo(result.n_owned)
-        return _sorted_by_id(result)
+        return sorted_by_id(result)
 
     def _migrate_neighbours(self, particles, owner, stay):
         """Every leaving particle goes to an adjacent slab: two neighbour exchanges."""
-        arrays = _field_arrays(particles)
+        arrays = field_arrays(particles)
         to_left = np.flatnonzero(owner == self.rank - 1)
         to_right = np.flatnonzero(owner == self.rank + 1)
         from_left, from_right = self._exchange(pack(arrays, to_left), pack(arrays, to_right))
         incoming = unpack_new(np.concatenate([from_left, from_right]), arrays)
-        return _merge_by_id(particles, np.flatnonzero(stay), incoming)
+        return merge_by_id(particles, np.flatnonzero(stay), incoming)
 
     def _migrate_all(self, particles, owner):
         """Some particle jumps more than one slab: one all-to-all by owner."""
-        return _send_to_ranks(particles, owner, self.cart)
+        return send_to_ranks(particles, owner, self.cart)
 
     def _exchange(self, to_left, to_right, counts=None):
         """Send packed rows to both neighbours; returns the rows (from_left, from_right).
@@ -378,7 +317,7 @@ class SlabDecomposition:
                            if self.left != MPI.PROC_NULL else np.empty(0, np.int64))
         self._send_right = (np.flatnonzero(hi - x < self.halo_width)
                             if self.right != MPI.PROC_NULL else np.empty(0, np.int64))
-        arrays = _field_arrays(owned)
+        arrays = field_arrays(owned)
         from_left, from_right = self._exchange(pack(arrays, self._send_left),
                                                pack(arrays, self._send_right))
         self._n_owned = n
@@ -411,7 +350,7 @@ class SlabDecomposition:
         start = time.perf_counter()
         try:
             if isinstance(arrays, Particles):
-                targets = _field_arrays(arrays)
+                targets = field_arrays(arrays)
             elif isinstance(arrays, np.ndarray):
                 targets = [arrays]
             else:
@@ -438,16 +377,6 @@ class SlabDecomposition:
 
     # -- load balance ---------------------------------------------------------------------------
 
-    def counts(self, particles):
-        """Owned counts of every rank (int64 array, the same on every rank)."""
-        counts = np.empty(self.size, np.int64)
-        self.cart.Allgather(np.array([particles.n_owned], np.int64), counts)
-        return counts
-
-    def imbalance(self, particles):
-        """Largest rank's owned count over the mean (1.0 is perfect balance)."""
-        return _imbalance(self.counts(particles))
-
     def rebalance(self, particles, step):
         """Move the slab edges to the quantiles of x when the load is uneven; returns owned-only.
 
@@ -472,21 +401,10 @@ class SlabDecomposition:
             self.migration_seconds += time.perf_counter() - start
 
     def _rebalance(self, particles, step):
-        tolerance = self.imbalance_tolerance
         counts = self.counts(particles)
-        before = _imbalance(counts)
+        before = imbalance_of(counts)
         periodic = step % self.rebalance_interval == 0
-        reason = None
-        if before > tolerance and (periodic or not self._refused):
-            reason = "over the tolerance"
-        elif periodic:
-            last_step, last_imbalance = self._reference
-            rate = max(0.0, before - last_imbalance) / max(step - last_step, 1)
-            projected = before + rate * self.rebalance_interval
-            if projected > tolerance:
-                reason = f"heading for {projected:.3f} by step {step + self.rebalance_interval}"
-        if periodic:
-            self._reference = (step, before)
+        reason = self._rebalance_reason(counts, step)
         if reason is None:
             return particles
         x = particles.position[:particles.n_owned, 0]
@@ -551,94 +469,18 @@ class SlabDecomposition:
         return edges
 
 
-def by_id_blocks(particles, comm):
-    """The owned particles regrouped so that rank r holds the r-th block of ids, sorted.
 
-    Collective. Ids are split into ``comm.size`` equal ranges between the
-    smallest and the largest id; each rank gets the particles of its range in
-    ascending id, so writing each rank's particles at ``offset`` (returned, the
-    exclusive scan of the counts) gives one array sorted by id whatever the rank
-    count (for output). Returns (Particles, offset, total).
-    """
-    owned = particles.owned() if particles.n_ghost else particles
-    if comm.size == 1:
-        return _sorted_by_id(owned), 0, owned.n_owned
-    ids = owned.id
-    bounds = np.array([-ids.min() if len(ids) else np.iinfo(np.int64).min,
-                       ids.max() if len(ids) else np.iinfo(np.int64).min], np.int64)
-    comm.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
-    low, high = -bounds[0], bounds[1]
-    if high < low:  # no particles anywhere
-        return owned, 0, 0
-    span = high - low + 1
-    # Block of each id: floor((id - low) * size / span), in exact integer arithmetic.
-    destination = ((ids - low) * comm.size // span).astype(np.int64)
-    block = _sorted_by_id(_send_to_ranks(owned, destination, comm))
-    count = np.array([block.n_owned], np.int64)
-    offset = np.zeros(1, np.int64)
-    comm.Exscan(count, offset)
-    total = np.zeros(1, np.int64)
-    comm.Allreduce(count, total)
-    return block, int(offset[0]) if comm.rank > 0 else 0, int(total[0])
+def slab_capacity(lower, upper, min_width):
+    """How many slabs at least ``min_width`` wide the domain holds along x (at least 1)."""
+    width = float(upper[0] - lower[0])
+    return max(1, int(np.floor(width / min_width * (1 + 1e-12))))
 
 
-def _send_to_ranks(particles, destination, comm):
-    """Every particle sent to rank ``destination[k]`` in one all-to-all; collective.
-
-    Returns the particles this rank received (owned only, in sender-rank order).
-    """
-    arrays = _field_arrays(particles)
-    order = np.argsort(destination, kind="stable")
-    buffer = pack(arrays, order)
-    row = buffer.shape[1]
-    send_counts = np.bincount(destination, minlength=comm.size).astype(np.int64)
-    recv_counts = np.empty(comm.size, np.int64)
-    comm.Alltoall(send_counts, recv_counts)
-    received = np.empty((int(recv_counts.sum()), row), np.uint8)
-    send_bytes = send_counts * row
-    recv_bytes = recv_counts * row
-    comm.Alltoallv([buffer, (send_bytes, _displacements(send_bytes)), MPI.BYTE],
-                   [received, (recv_bytes, _displacements(recv_bytes)), MPI.BYTE])
-    return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
-
-
-def _imbalance(counts):
-    mean = counts.sum() / len(counts)
-    return float(counts.max() / mean) if mean > 0 else 1.0
-
-
-def _displacements(counts):
-    return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-
-
-def _merge_by_id(particles, kept, incoming):
-    """Owned rows ``kept`` of ``particles`` plus ``incoming`` (arrays in FIELDS order), by id.
-
-    The kept rows are usually in ascending id already (migrate keeps them so):
-    then the few incoming particles are merged in with one scatter per field
-    instead of a concatenation and a sort.
-    """
-    ids = particles.arrays["id"][kept]
-    incoming_ids = incoming[list(FIELDS).index("id")]
-    k, m = len(kept), len(incoming_ids)
-    if m == 0 or not np.all(ids[1:] > ids[:-1]):
-        parts = [particles.select(kept), Particles(dict(zip(FIELDS, incoming)))]
-        return _sorted_by_id(Particles.concatenate(parts))
-    order = np.argsort(incoming_ids, kind="stable")
-    sorted_ids = incoming_ids[order]
-    # Final slot of each row: its rank among the kept plus the incoming ids below it.
-    # One gather per field from [all rows of particles, incoming rows].
-    source = np.empty(k + m, np.int64)
-    source[np.arange(k) + np.searchsorted(sorted_ids, ids)] = kept
-    source[np.arange(m) + np.searchsorted(ids, sorted_ids)] = len(particles) + order
-    merged = {}
-    for name, extra in zip(FIELDS, incoming):
-        merged[name] = np.concatenate([particles.arrays[name], extra]).take(source, axis=0)
-    return Particles(merged)
-
-
-def _sorted_by_id(particles):
-    ids = particles.arrays["id"]
-    if len(ids) < 2 or np.all(ids[1:] > ids[:-1]):
-        return particles
-    return particles.select(np.argsort(ids, kind="stable"))
+def too_many_slabs(ranks, lower, upper, min_width):
+    """The one-line refusal for more ranks than the domain holds slabs."""
+    width = float(upper[0] - lower[0])
+    capacity = slab_capacity(lower, upper, min_width)
+    plural = "s" if capacity > 1 else ""
+    return (f"{ranks} ranks need slabs at least {min_width:g} m wide ({_WIDTH_RULE}), but the "
+            f"domain is {width:g} m wide along x and holds at most {capacity} such slab{plural}: "
+            f"run on at most {capacity} rank{plural}")

@@ -15,8 +15,7 @@ import numpy as np
 
 from parmps.io.series import Series
 from parmps.probes.sampling import (SampleRows, kernel_sums, lattice_sum, mean_sum,
-                                    shepard_pressure,
-                                    surface_height, water_depth)
+                                    shepard_pressure, surface_height, water_depth)
 from parmps.probes.settings import rest_positions
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
@@ -30,62 +29,106 @@ UNITS = {"pressure": "Pa", "level": "m", "force": "N", "displacement": "m"}
 
 
 class Probe:
-    """One probe's geometry: its row of sample points (None for a body's force) and how a
-    value is made from their sums."""
+    """One probe's geometry: its sample points (None for a body's force) and how a value is
+    made from their sums.
 
-    def __init__(self, spec, spacing, rest=None):
-        """``rest``: a displacement probe's nodes' mean rest position (2,)."""
+    ``row`` is ``(origin, direction, step, count, cross, cross_step, cross_count)`` as
+    :class:`SampleRows` takes them; a force probe's ``area`` [m^2] is the wall area each
+    sample stands for (in 2D per metre of depth, ``DEPTH``) and ``normals`` its normal.
+    """
+
+    def __init__(self, spec, spacing, dimension=2, rest=None, boxes=()):
+        """``rest``: a displacement probe's nodes' mean rest position; ``boxes``: the case's
+        wall boxes ``(lower, upper)`` (a force probe on a wall box)."""
         self.name = spec["name"]
         self.kind = spec["kind"]
         self.spec = spec
+        self.dimension = dimension
         self.radius = spec["radius"] * spacing
+        self.full_sum = lattice_sum(spec["radius"], dimension)
+        # The depth integrates the fill: its mean over the water must be 1, not its peak.
+        self.mean_sum = mean_sum(spec["radius"], dimension)
         self.min_fill = spec["min_fill"]
-        self.shape = (2,) if self.kind in ("force", "displacement") else ()
+        self.shape = (dimension,) if self.kind in ("force", "displacement") else ()
         self.rest = rest
-        normal = np.zeros(2)
+        normal = np.zeros(dimension)
         if spec["normal"] is not None:
-            normal = np.asarray(spec["normal"], float) / math.hypot(*spec["normal"])
+            normal = np.asarray(spec["normal"], float) / np.linalg.norm(spec["normal"])
         self.normal = normal
-        # A point on a wall: half a spacing along the normal, the first fluid layer's line.
-        shift = 0.5 * spacing * normal
-        self.ds = 0.0
+        self.rows, self.area, self.normals = [], [], []
         if self.kind == "pressure":
-            self.row = (np.asarray(spec["position"]) + shift, (1.0, 0.0), spacing, 1)
+            # A point on a wall: half a spacing along the normal, the first fluid layer's line.
+            self.rows = [(np.asarray(spec["position"]) + 0.5 * spacing * normal,
+                          np.eye(dimension)[0], spacing, 1, None, 1.0, 1)]
         elif self.kind == "level":
             bottom, top = (np.asarray(p, float) for p in spec["line"])
             step = 0.25 * spacing
             count = int(math.floor((top[-1] - bottom[-1]) / step + 1e-9)) + 1
-            # Up the last axis, the vertical one.
-            self.row = (bottom, np.eye(len(bottom))[-1], step, count)
+            self.rows = [(bottom, np.eye(dimension)[-1], step, count, None, 1.0, 1)]
             self.heights = bottom[-1] + step * np.arange(count)
-        elif spec["segment"]:
-            a, b = (np.asarray(p, float) for p in spec["segment"])
-            length = math.hypot(*(b - a))
-            count = max(1, math.ceil(length / (0.5 * spacing)))
-            self.ds = length / count
-            tangent = (b - a) / length
-            self.row = (a + 0.5 * self.ds * tangent + shift, tangent, self.ds, count)
+        elif self.kind == "force" and not spec["body"]:
+            for lower, upper, outward in self._faces(spec, boxes):
+                self._add_patch(lower, upper, outward, spacing)
+
+    def _faces(self, spec, boxes):
+        """The wall faces a force probe integrates over: ``(corner, corner, normal into the
+        fluid)`` for its segment (2D) or patch (3D), or every face of its wall box."""
+        if spec["segment"] or spec["patch"]:
+            a, b = (np.asarray(p, float) for p in (spec["segment"] or spec["patch"]))
+            return [(a, b, self.normal)]
+        lower, upper = (np.asarray(c, float) for c in boxes[spec["wall_box"]])
+        faces = []
+        for axis in range(self.dimension):
+            for side, plane in ((-1.0, lower[axis]), (1.0, upper[axis])):
+                low, high = lower.copy(), upper.copy()
+                low[axis] = high[axis] = plane
+                faces.append((low, high, side * np.eye(self.dimension)[axis]))
+        return faces
+
+    def _add_patch(self, a, b, normal, spacing):
+        """Samples every half spacing or less over the segment or axis-aligned rectangle
+        with corners ``a`` and ``b``, shifted half a spacing along ``normal`` onto the
+        centre line (plane) of the first fluid layer."""
+        shift = 0.5 * spacing * normal
+        spans = [axis for axis in range(len(a)) if b[axis] != a[axis]]
+        if self.dimension == 2:
+            length = float(np.linalg.norm(b - a))
+            directions = [((b - a) / length, length)]
         else:
-            self.row = None
-        dimension = len(self.row[0]) if self.row else 2
-        self.full_sum = lattice_sum(spec["radius"], dimension)
-        # The depth integrates the fill: its mean over the water must be 1, not its peak.
-        self.mean_sum = mean_sum(spec["radius"], dimension)
+            directions = [(np.eye(len(a))[axis] * np.sign(b[axis] - a[axis]),
+                           abs(b[axis] - a[axis])) for axis in spans]
+        grid = []
+        for direction, length in directions:
+            # A length of a whole number of half spacings is that many samples, whatever
+            # its round-off (0.06 / 0.005 is 12.000000000000002).
+            count = max(1, math.ceil(length / (0.5 * spacing) * (1 - 1e-12)))
+            grid.append((direction, length / count, count))
+        (u, du, nu), (v, dv, nv) = grid if len(grid) == 2 else (grid[0], (None, 1.0, 1))
+        origin = a + 0.5 * du * u + (0.5 * dv * v if v is not None else 0.0) + shift
+        self.rows.append((origin, u, du, nu, v, dv, nv))
+        self.area.append(du * (dv if v is not None else DEPTH))
+        self.normals.append(normal)
+
+    @property
+    def sample_count(self):
+        return sum(row[3] * row[6] for row in self.rows)
 
     def attributes(self):
         out = {"kind": self.kind, "units": UNITS[self.kind]}
-        for key in ("position", "normal", "line", "segment", "nodes"):
+        for key in ("position", "normal", "line", "segment", "patch", "nodes"):
             if self.spec[key] not in (None, []):
                 out[key] = np.asarray(self.spec[key], float)
         if self.kind == "level":
             out["reading"] = self.spec["reading"]
         if self.spec["body"]:
             out["body"] = self.spec["body"]
-        if self.row is not None:
+        if self.kind == "force" and not self.spec["body"] and self.spec["wall_box"] >= 0:
+            out["wall_box"] = self.spec["wall_box"]
+        if self.rows:
             out["radius"] = self.radius
             out["min_fill"] = self.min_fill
             out["kernel"] = "Wendland C2, Shepard-normalised"
-        if self.kind == "force":
+        if self.kind == "force" and self.dimension == 2:
             out["depth"] = DEPTH
         return out
 
@@ -100,11 +143,17 @@ class Probe:
             if self.spec["reading"] == "depth":
                 return water_depth(sums, self.mean_sum, self.heights)
             return surface_height(sums, self.full_sum, self.heights)
-        if self.row is None:
+        if not self.rows:
             return np.asarray(bodies[self.spec["body"]].total_fluid_force(), float)
         # A sample with too little fluid beside it is dry: no load there.
         pressure = np.nan_to_num(shepard_pressure(sums, self.full_sum, self.min_fill))
-        return -self.normal * (pressure.sum() * self.ds * DEPTH)
+        force = np.zeros(self.dimension)
+        offset = 0
+        for row, area, normal in zip(self.rows, self.area, self.normals):
+            count = row[3] * row[6]
+            force -= normal * (pressure[offset:offset + count].sum() * area)
+            offset += count
+        return force
 
 
 class Probes(Observer):
@@ -112,14 +161,16 @@ class Probes(Observer):
 
     name = "probes"
 
-    def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=()):
-        """``bodies``: the case's [[body]] tables (a displacement probe's rest positions)."""
+    def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=(),
+                 dimension=2, boxes=()):
+        """``bodies``: the case's [[body]] tables (a displacement probe's rest positions);
+        ``boxes``: the case's wall boxes as ``(lower, upper)`` (a force probe on one)."""
         self.result = result
         self.comm = result.comm
         self.model = model
         by_name = {spec["name"] or f"body{k}": spec for k, spec in enumerate(bodies)}
-        self.probes = [Probe(spec, spacing, rest_positions(by_name[spec["body"]])[
-            spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None)
+        self.probes = [Probe(spec, spacing, dimension, rest_positions(by_name[spec["body"]])[
+            spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None, boxes)
             for spec in specs]
         self.cadences = [SimulatedInterval(p.spec["interval"], end_time)
                          if p.spec["interval"] > 0 else None for p in self.probes]
@@ -145,7 +196,9 @@ class Probes(Observer):
         if self.comm.rank == 0:
             os.makedirs(self.csv_directory, exist_ok=True)
             for probe, series in zip(self.probes, self.series):
-                columns = {"force": "time,fx,fy", "displacement": "time,dx,dy"}.get(
+                axes = "xyz"[:probe.dimension]
+                columns = {"force": "time," + ",".join(f"f{a}" for a in axes),
+                           "displacement": "time," + ",".join(f"d{a}" for a in axes)}.get(
                     probe.kind, "time,value")
                 with open(self._csv_path(probe), "w") as handle:
                     handle.write(f"# probe {probe.name}: {probe.kind} "
@@ -181,7 +234,7 @@ class Probes(Observer):
         values, offset = [], 0
         for k in due:
             probe = self.probes[k]
-            count = probe.row[3] if probe.row is not None else 0
+            count = probe.sample_count
             values.append(probe.value(sums[offset:offset + count] if count else None, bodies))
             offset += count
         return values
@@ -189,12 +242,18 @@ class Probes(Observer):
     def _sample_rows(self, due):
         # One row set per combination of due probes; most runs see one or two.
         if due not in self._rows:
-            rows = [self.probes[k].row for k in due if self.probes[k].row is not None]
-            self._rows[due] = None if not rows else SampleRows(
-                [r[0] for r in rows], [r[1] for r in rows], [r[2] for r in rows],
-                [r[3] for r in rows], [self.probes[k].radius for k in due
-                                       if self.probes[k].row is not None])
+            rows = [(row, self.probes[k].radius) for k in due for row in self.probes[k].rows]
+            self._rows[due] = None if not rows else self._as_sample_rows(rows)
         return self._rows[due]
+
+    @staticmethod
+    def _as_sample_rows(rows):
+        """SampleRows of ``(row, radius)`` pairs, a row as :class:`Probe` keeps it."""
+        d = len(rows[0][0][0])
+        column = list(zip(*(row for row, _ in rows)))
+        cross = [np.zeros(d) if c is None else c for c in column[4]]
+        return SampleRows(column[0], column[1], column[2], column[3],
+                          [radius for _, radius in rows], cross, column[5], column[6])
 
     def flush(self):
         if self.comm.rank == 0:

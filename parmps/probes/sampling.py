@@ -1,7 +1,8 @@
 """Kernel sums of the particles around sample points, reduced over the ranks.
 
 Every probe is a row of evenly spaced sample points ``origin + k step u``
-(k = 0..count-1; a point probe is a row of one). Each rank adds its *owned*
+(k = 0..count-1; a point probe is a row of one), or a grid of them (a patch of
+a 3D wall: rows repeated along a second direction). Each rank adds its *owned*
 particles' contributions, then one allreduce combines them, so a sample reads
 the same on any rank count whether or not its support crosses a slab edge
 (ghosts are never counted, so no particle counts twice).
@@ -9,8 +10,8 @@ the same on any rank count whether or not its support crosses a slab edge
 The weight is Wendland's C2 kernel ``w(q) = (1 - q)^4 (1 + 4q)`` for
 ``q = r / R < 1``: smooth and finite at r = 0, unlike the MPS weight, so a
 particle passing over the point does not dominate the average. Sums are
-normalised by ``lattice_sum(R / l0)``, the sum over a full square lattice of
-spacing l0 with a particle on the point.
+normalised by ``lattice_sum(R / l0, d)``, the sum over a full square (cubic)
+lattice of spacing l0 with a particle on the point.
 """
 
 import math
@@ -28,8 +29,21 @@ FLUID_WEIGHT, FLUID_PRESSURE, OCCUPIED_WEIGHT = 0, 1, 2
 
 
 @numba.njit(cache=True)
-def _accumulate(position, kind, pressure, n_owned, origin, direction, step, count, start,
-                radius, box, sums):
+def _index_range(offset, direction, step, count, radius):
+    """The indices k of a row's samples within ``radius`` of a point ``offset`` from its origin."""
+    if count == 1:
+        return 0, 0
+    along = 0.0
+    for a in range(offset.shape[0]):
+        along += offset[a] * direction[a]
+    along /= step
+    reach = radius / step
+    return max(0, int(math.ceil(along - reach))), min(count - 1, int(math.floor(along + reach)))
+
+
+@numba.njit(cache=True)
+def _accumulate(position, kind, pressure, n_owned, origin, direction, step, count, cross,
+                cross_step, cross_count, start, radius, box, sums):
     d = position.shape[1]
     offset = np.empty(d)
     for i in range(n_owned):
@@ -44,30 +58,26 @@ def _accumulate(position, kind, pressure, n_owned, origin, direction, step, coun
                     inside = False
             if not inside:
                 continue
-            # Only the samples within the radius along the row: its index range.
-            along = 0.0
             for a in range(d):
                 offset[a] = position[i, a] - origin[g, a]
-                along += offset[a] * direction[g, a]
-            first = 0
-            last = count[g] - 1
-            if count[g] > 1:
-                along /= step[g]
-                reach = radius[g] / step[g]
-                first = max(first, int(math.ceil(along - reach)))
-                last = min(last, int(math.floor(along + reach)))
-            for s in range(first, last + 1):
-                r2 = 0.0
-                for a in range(d):
-                    component = offset[a] - s * step[g] * direction[g, a]
-                    r2 += component * component
-                w = wendland(math.sqrt(r2) / radius[g])
-                if w > 0.0:
-                    row = start[g] + s
-                    sums[row, OCCUPIED_WEIGHT] += w
-                    if fluid:
-                        sums[row, FLUID_WEIGHT] += w
-                        sums[row, FLUID_PRESSURE] += w * pressure[i]
+            # Only the samples within the radius along each direction: their index ranges.
+            first, last = _index_range(offset, direction[g], step[g], count[g], radius[g])
+            first_c, last_c = _index_range(offset, cross[g], cross_step[g], cross_count[g],
+                                           radius[g])
+            for c in range(first_c, last_c + 1):
+                for s in range(first, last + 1):
+                    r2 = 0.0
+                    for a in range(d):
+                        ds = offset[a] - s * step[g] * direction[g, a] \
+                            - c * cross_step[g] * cross[g, a]
+                        r2 += ds * ds
+                    w = wendland(math.sqrt(r2) / radius[g])
+                    if w > 0.0:
+                        row = start[g] + c * count[g] + s
+                        sums[row, OCCUPIED_WEIGHT] += w
+                        if fluid:
+                            sums[row, FLUID_WEIGHT] += w
+                            sums[row, FLUID_PRESSURE] += w * pressure[i]
 
 
 def mean_sum(radius_in_spacings, dimension=2):
@@ -84,32 +94,51 @@ def mean_sum(radius_in_spacings, dimension=2):
 
 
 def lattice_sum(radius_in_spacings, dimension=2):
-    """The kernel's sum over a full square (cubic) lattice of unit spacing, a node on the
-    point."""
+    """The kernel's sum over a full lattice (square, cubic) of unit spacing, a node on the point."""
     return smooth_reference(1.0, radius_in_spacings, dimension)
 
 
 class SampleRows:
     """Rows of sample points: ``origin`` (G×d), unit ``direction`` (G×d), ``step`` and
-    ``radius`` [m] (G), ``count`` (G), laid out one after the other."""
+    ``radius`` [m] (G), ``count`` (G), laid out one after the other.
 
-    def __init__(self, origin, direction, step, count, radius):
-        self.origin = np.atleast_2d(np.ascontiguousarray(origin, dtype=np.float64))
+    A row may be a grid: ``cross`` (G×d), ``cross_step`` and ``cross_count`` (G) repeat it
+    along a second direction (a patch of a 3D wall); by default each row is one line.
+    Sample ``c count + s`` of a row lies at ``origin + s step direction + c cross_step cross``.
+    """
+
+    def __init__(self, origin, direction, step, count, radius, cross=None, cross_step=None,
+                 cross_count=None):
+        self.origin = np.ascontiguousarray(origin, dtype=np.float64)
+        self.origin = self.origin.reshape(len(self.origin), -1)
         d = self.origin.shape[1]
         self.direction = np.ascontiguousarray(direction, dtype=np.float64).reshape(-1, d)
         self.step = np.ascontiguousarray(step, dtype=np.float64)
         self.count = np.ascontiguousarray(count, dtype=np.int64)
         self.radius = np.ascontiguousarray(radius, dtype=np.float64)
-        self.start = np.concatenate([[0], np.cumsum(self.count)[:-1]]).astype(np.int64)
-        self.total = int(self.count.sum())
-        end = self.origin + ((self.count - 1) * self.step)[:, None] * self.direction
-        lower = np.minimum(self.origin, end) - self.radius[:, None]
-        upper = np.maximum(self.origin, end) + self.radius[:, None]
+        groups = len(self.origin)
+        self.cross = np.ascontiguousarray(np.zeros((groups, d)) if cross is None else cross,
+                                          dtype=np.float64).reshape(-1, d)
+        self.cross_step = np.ascontiguousarray(
+            np.ones(groups) if cross_step is None else cross_step, dtype=np.float64)
+        self.cross_count = np.ascontiguousarray(
+            np.ones(groups) if cross_count is None else cross_count, dtype=np.int64)
+        sizes = self.count * self.cross_count
+        self.start = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        self.total = int(sizes.sum())
+        along = ((self.count - 1) * self.step)[:, None] * self.direction
+        across = ((self.cross_count - 1) * self.cross_step)[:, None] * self.cross
+        corners = np.stack([self.origin, self.origin + along, self.origin + across,
+                            self.origin + along + across])
+        lower = corners.min(axis=0) - self.radius[:, None]
+        upper = corners.max(axis=0) + self.radius[:, None]
         self.box = np.ascontiguousarray(np.hstack([lower, upper]))
 
     def points(self, g):
-        k = np.arange(self.count[g])
-        return self.origin[g] + (k * self.step[g])[:, None] * self.direction[g]
+        s = np.tile(np.arange(self.count[g]), self.cross_count[g])
+        c = np.repeat(np.arange(self.cross_count[g]), self.count[g])
+        return (self.origin[g] + (s * self.step[g])[:, None] * self.direction[g]
+                + (c * self.cross_step[g])[:, None] * self.cross[g])
 
 
 def kernel_sums(rows, position, kind, pressure, n_owned, comm):
@@ -119,7 +148,8 @@ def kernel_sums(rows, position, kind, pressure, n_owned, comm):
     if n_owned and rows.total:
         _accumulate(np.ascontiguousarray(position), np.ascontiguousarray(kind),
                     np.ascontiguousarray(pressure), int(n_owned), rows.origin, rows.direction,
-                    rows.step, rows.count, rows.start, rows.radius, rows.box, sums)
+                    rows.step, rows.count, rows.cross, rows.cross_step, rows.cross_count,
+                    rows.start, rows.radius, rows.box, sums)
     total = np.empty_like(sums)
     comm.Allreduce(sums, total, op=MPI.SUM)
     return total

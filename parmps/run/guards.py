@@ -21,6 +21,7 @@ communicator before anyone raises.
 import numpy as np
 
 from parmps.errors import RunFailure
+from parmps.core.geometry import format_point
 from parmps.core.particles import FLUID
 from parmps.boundaries.walls import travel
 
@@ -28,26 +29,45 @@ from parmps.boundaries.walls import travel
 # leaked: half a spacing puts its centre on the first wall layer's centre line.
 WALL_MARGIN = 0.5
 
-def wall_rectangles(case, time=0.0):
-    """The wall material at ``time`` as rectangles ``(lower, upper, name)``, in metres.
+# A tank's side walls along each horizontal axis (lower side, upper side), for messages.
+SIDE_NAMES = (("left wall", "right wall"), ("front wall", "back wall"))
 
-    A tank gives its left, right and bottom walls (and top when closed), each
-    as thick as its wall and dummy layers; a wall box is its own rectangle.
-    Moving tanks and boxes (parmps.boundaries.walls) are where their motion has taken them.
+
+def wall_rectangles(case, time=0.0):
+    """The wall material at ``time`` as boxes ``(lower, upper, name)``, in metres.
+
+    A tank gives its side walls (left and right, and in 3D front and back) and its
+    bottom (and top when closed), each as thick as its wall and dummy layers; a
+    wall box is its own box. Moving tanks and boxes (parmps.boundaries.walls) are
+    where their motion has taken them.
     """
     spacing = case["particles"]["spacing"]
     rectangles = []
     for k, spec in enumerate(case.get("tank", ())):
         shift = travel(spec, time)
-        (x0, y0), (x1, y1) = np.add(spec["lower"], shift), np.add(spec["upper"], shift)
+        inner_lower = np.add(spec["lower"], shift)
+        inner_upper = np.add(spec["upper"], shift)
         thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
-        top = y1 if spec["open_top"] else y1 + thick
+        # The walls' outer box: the open top ends at the inner box's top.
+        outer_lower = inner_lower - thick
+        outer_upper = inner_upper + thick
+        if spec["open_top"]:
+            outer_upper[-1] = inner_upper[-1]
         name = f"tank[{k}]"
-        rectangles.append(((x0 - thick, y0 - thick), (x0, top), f"{name} left wall"))
-        rectangles.append(((x1, y0 - thick), (x1 + thick, top), f"{name} right wall"))
-        rectangles.append(((x0 - thick, y0 - thick), (x1 + thick, y0), f"{name} bottom"))
+        d = len(inner_lower)
+        sides = [(a, side, f"{name} {SIDE_NAMES[a][side]}")
+                 for a in range(d - 1) for side in (0, 1)]
+        sides.append((d - 1, 0, f"{name} bottom"))
         if not spec["open_top"]:
-            rectangles.append(((x0 - thick, y1), (x1 + thick, y1 + thick), f"{name} top"))
+            sides.append((d - 1, 1, f"{name} top"))
+        for axis, side, label in sides:
+            lower, upper = outer_lower.copy(), outer_upper.copy()
+            if side == 0:
+                upper[axis] = inner_lower[axis]
+            else:
+                lower[axis] = inner_upper[axis]
+                upper[axis] = inner_upper[axis] + thick
+            rectangles.append((tuple(lower), tuple(upper), label))
     for k, spec in enumerate(case.get("wall_box", ())):
         shift = travel(spec, time)
         rectangles.append((tuple(np.add(spec["lower"], shift)),
@@ -56,13 +76,12 @@ def wall_rectangles(case, time=0.0):
 
 
 def inside_rectangles(position, rectangles, margin):
-    """Index of the first rectangle (shrunk by ``margin``) holding each point, or -1."""
+    """Index of the first box (shrunk by ``margin``) holding each point, or -1."""
     which = np.full(len(position), -1, np.int64)
-    x, y = position[:, 0], position[:, 1]
-    # Few rectangles, many points: loop over the rectangles, vectorise the points.
+    # Few boxes, many points: loop over the boxes, vectorise the points.
     for k, (lower, upper, _) in reversed(list(enumerate(rectangles))):
-        inside = ((x > lower[0] + margin) & (x < upper[0] - margin) &
-                  (y > lower[1] + margin) & (y < upper[1] - margin))
+        inside = np.all((position > np.add(lower, margin))
+                        & (position < np.subtract(upper, margin)), axis=1)
         which[inside] = k
     return which
 
@@ -80,16 +99,16 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step):
     if np.any(hit):
         ids = particles.id[:n][fluid][hit]
         first = int(np.argmin(ids))
-        x, y = position[hit][first]
-        local = (int(ids[first]), int(which[hit][first]), float(x), float(y),
+        local = (int(ids[first]), int(which[hit][first]), tuple(position[hit][first]),
                  int(np.count_nonzero(hit)))
     found = [item for item in comm.allgather(local) if item is not None]
     if found:
-        pid, k, x, y, _ = min(found)
-        count = sum(item[4] for item in found)
+        pid, k, point, _ = min(found)
+        count = sum(item[3] for item in found)
         raise RunFailure(
             f"step {step}: fluid particle {pid} went through a wall: it is inside "
-            f"{rectangles[k][2]} at ({x:.4g}, {y:.4g}) ({count} fluid particles inside walls); "
+            f"{rectangles[k][2]} at {format_point(point, '.4g')} ({count} fluid particles inside "
+            f"walls); "
             f"the wall's pressure did not hold it back (weak PPE source: mps.density.relaxation, "
             f"mps.compressibility) or the step is too long for the flow (lower time.dt_max "
-            f"or time.cfl)", where=(x, y))
+            f"or time.cfl)", where=point)

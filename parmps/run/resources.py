@@ -28,10 +28,11 @@ def particle_estimate(case):
         area += math.prod(u - l for u, l in zip(block["upper"], block["lower"]))
     for spec in case.get("tank", ()):
         thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
-        width = spec["upper"][0] - spec["lower"][0] + 2 * thick
-        height = spec["upper"][1] - spec["lower"][1] + thick * (1 if spec["open_top"] else 2)
-        area += width * height - (width - 2 * thick) * (height - thick
-                                                         * (1 if spec["open_top"] else 2))
+        inner = [u - l for u, l in zip(spec["upper"], spec["lower"])]
+        # The walls' outer box, less the inner box (the roof's layers when closed).
+        outer = [e + 2 * thick for e in inner[:-1]] + \
+            [inner[-1] + thick * (1 if spec["open_top"] else 2)]
+        area += math.prod(outer) - math.prod(inner)
     for spec in case.get("wall_box", ()):
         area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
     for spec in case.get("inlet", ()):
@@ -45,7 +46,9 @@ def memory_estimate(case):
     spacing = case["particles"]["spacing"]
     if spacing is None:
         return particles * _BYTES_PER_PARTICLE
-    neighbours = math.pi * (search_radius(case) / spacing) ** 2
+    # Lattice neighbours within the search radius: the volume of a d-ball of that radius.
+    d = case.get("dimension", 2)
+    neighbours = math.pi ** (d / 2) / math.gamma(d / 2 + 1) * (search_radius(case) / spacing) ** d
     return particles * (_BYTES_PER_PARTICLE + neighbours * _BYTES_PER_PAIR)
 
 

@@ -75,9 +75,9 @@ class Simulation:
     def _set_up_fluid(self):
         from parmps.core import scene
         from parmps.fluid.projection import FluidSolver
-        from parmps.parallel.slabs import SlabDecomposition
+        from parmps.parallel import create_decomposition
         case, comm = self.case, self.comm
-        self.decomposition = SlabDecomposition(comm, case)
+        self.decomposition = create_decomposition(comm, case)
         open_boundaries = None
         if case["inlet"] or case["outlet"]:
             from parmps.boundaries.open import OpenBoundaries
@@ -111,14 +111,19 @@ class Simulation:
         """What --check prints: counts by kind, reference values, first dt, memory, bodies."""
         total = sum(self.counts.values())
         self.stepper.start(self.state)
-        summary = {"particles": dict(self.counts, total=total),
-                   "initial_dt": choose_dt(self.case["time"],
-                                           self.stepper.dt_limits(self.state), 1),
+        limits = self.stepper.dt_limits(self.state)
+        summary = {"dimension": self.case["dimension"],
+                   "particles": dict(self.counts, total=total),
+                   "initial_dt": choose_dt(self.case["time"], limits, 1),
+                   "dt_limits": dict({"dt_max": self.case["time"]["dt_max"]},
+                                     **{limit.name: limit.seconds for limit in limits}),
                    "ranks": self.comm.size}
         if self.decomposition is not None:
             c = self.fluid.constants
             summary.update({"n0": c.n0, "n0_laplacian": c.n0_laplacian,
                             "lambda0": c.lambda0,
+                            "radii": {"number_density": c.re_number_density / c.spacing,
+                                      "laplacian": c.re_laplacian / c.spacing},
                             "memory_estimate_mb": memory_estimate(self.case) / 2 ** 20})
         if self.model is not None and self.decomposition is None:
             counts = self.model.substep_counts(summary["initial_dt"])
@@ -147,7 +152,9 @@ class Simulation:
         if case["probe"]:
             from parmps.probes.observer import Probes
             found.append(Probes(result, case["probe"], case["particles"]["spacing"],
-                                self.model, interval, self.end_time, case["body"]))
+                                self.model, interval, self.end_time, case["body"],
+                                case["dimension"],
+                                [(box["lower"], box["upper"]) for box in case["wall_box"]]))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)

@@ -3,6 +3,7 @@
 import math
 
 from parmps.config import Key, Section
+from parmps.errors import CaseError
 
 SECTIONS = {
     "solid": Section({
@@ -19,7 +20,9 @@ SECTIONS = {
     }, doc="mass-spring solver settings shared by every body"),
     "body": Section({
         "name": Key("str", "", doc="used in the output; default body<k>"),
-        "type": Key("str", "lattice", choices=("lattice", "general")),
+        "type": Key("str", "lattice", choices=("lattice", "general"),
+                    doc="\"lattice\": nx by ny nodes with springs generated; \"general\": "
+                        "nodes, springs and boundary loop given"),
         "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
         "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
         "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
@@ -74,7 +77,9 @@ SECTIONS = {
                               "to right)"),
         "load": Key("tables", [], keys={
             "nodes": Key("str", choices=("top", "bottom", "left", "right", "all", "row",
-                                         "column", "ids")),
+                                         "column", "ids"),
+                         doc="which nodes the force acts on: a side, all, a row or column "
+                             "(index), or listed ids"),
             "index": Key("int", 0, ge=0, doc="the row or column (from 0 at bottom/left)"),
             "ids": Key("ints", [], ge=0, doc="the nodes, with nodes = \"ids\""),
             "force": Key("vec2", doc="force on each node of the set [N]"),
@@ -84,6 +89,13 @@ SECTIONS = {
         }, doc="[[body.load]]: a force on a node set over a time window"),
     }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
 }
+
+
+def check_dimension_support(raw, dimension):
+    """Bodies are 2D so far: a 3D case with a [[body]] is refused in one line."""
+    if dimension != 2 and raw.get("body"):
+        raise CaseError(f"[[body]]: solid bodies run in 2D cases only so far; this case is "
+                        f"{dimension}D (domain.lower has {dimension} components)")
 
 
 def check(case):

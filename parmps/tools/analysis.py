@@ -13,6 +13,7 @@ import numpy as np
 
 from parmps.core.particles import FLUID
 from parmps.io.frames import read_frames
+from parmps.result import open_result
 
 
 # --------------------------------------------------------------------------
@@ -20,12 +21,8 @@ from parmps.io.frames import read_frames
 
 def result_case(path):
     """The validated case a result file was run with (its --set and --end-time included)."""
-    import h5py
-
-    from parmps import config, schema
-    with h5py.File(path, "r") as handle:
-        text = handle["case"].attrs["toml"]
-    return schema.validate(config.load_text(text, str(path)))
+    with open_result(path) as result:
+        return result.case
 
 
 
@@ -35,27 +32,26 @@ def run_summary(path):
 
     An empty dict when the file is missing or has no diagnostics (a run that never started).
     """
-    import h5py
+    from parmps.errors import CaseError
     try:
-        with h5py.File(path, "r") as handle:
-            diagnostics = handle["diagnostics"]
-            wall = diagnostics["wall_seconds"][()]
-            names = sorted(handle["frames"]) if "frames" in handle else []
+        with open_result(path) as result:
+            diagnostics = result.diagnostics
+            wall = diagnostics["wall_seconds"]
             finite = True
-            if names:
-                last = handle["frames"][names[-1]]
-                finite = bool(np.all(np.isfinite(last["position"][()])) and
-                              np.all(np.isfinite(last["velocity"][()])))
+            if len(result.frames):
+                last = result.frames[-1]
+                finite = bool(np.all(np.isfinite(last.position)) and
+                              np.all(np.isfinite(last.velocity)))
             steps = len(wall)
             summary = {"wall": float(wall[-1]) if steps else 0.0,
                        "steps": int(steps),
                        "end": float(diagnostics["time"][-1]) if steps else 0.0,
                        "finite": finite}
             if "ksp_iterations" in diagnostics:  # a solid-only run solves no pressure
-                summary["ksp_mean"] = (float(np.mean(diagnostics["ksp_iterations"][()]))
+                summary["ksp_mean"] = (float(np.mean(diagnostics["ksp_iterations"]))
                                        if steps else 0.0)
             return summary
-    except (OSError, KeyError):
+    except (CaseError, OSError, KeyError):
         return {}
 
 
@@ -82,7 +78,7 @@ def log_slope(x, y):
 
 def gravity(case):
     """|g| [m/s^2] of a case."""
-    return float(np.hypot(*case["physics"]["gravity"]))
+    return float(np.linalg.norm(case["physics"]["gravity"]))
 
 
 def fluid_extent(case):
@@ -101,16 +97,33 @@ def dam_break_time_scale(case):
     return math.sqrt(2.0 * gravity(case) / (upper[0] - lower[0]))
 
 
+def column_time_scale(case):
+    """sqrt(g / H) [1/s] of a water column H high: t* = t sqrt(g / H) (Lobovsky et al.)."""
+    lower, upper = fluid_extent(case)
+    return math.sqrt(gravity(case) / (upper[1] - lower[1]))
+
+
 # --------------------------------------------------------------------------
 # Dam break: the surge front against Martin & Moyce
 
-def surge_front(path, wall_x, spacing):
-    """Times and leading-edge x positions of the fluid (max x of fluid plus half a spacing)."""
+def front(frame, wall_x, spacing, floor=None, band=None):
+    """The surge front of one frame: the largest x of the fluid particles plus half a
+    spacing, measured from the wall at ``wall_x``. With ``floor`` and ``band``, only the
+    fluid within ``band`` of the floor counts (the front on the floor, once a jet has
+    left it). ``frame``: a frame of :func:`parmps.open_result` or a dict of its arrays."""
+    position = frame["position"][frame["kind"] == FLUID]
+    if floor is not None:
+        position = position[position[:, 1] < floor + band]
+    return float(position[:, 0].max() + 0.5 * spacing - wall_x)
+
+
+def surge_front(path, wall_x, spacing, floor=None, band=None):
+    """Times and surge fronts (:func:`front`) of every frame of a result."""
     times, fronts = [], []
-    for frame in read_frames(path):
-        fluid = frame["kind"] == FLUID
-        times.append(frame["time"])
-        fronts.append(frame["position"][fluid, 0].max() + 0.5 * spacing - wall_x)
+    with open_result(path) as result:
+        for frame in result.frames:
+            times.append(frame.time)
+            fronts.append(front(frame, wall_x, spacing, floor, band))
     return np.array(times), np.array(fronts)
 
 
@@ -175,7 +188,8 @@ def hydrostatic_pressure_error(path, case, settle_time):
       the first frame, minus 1 (positive: the column has expanded).
     """
     lower, upper = fluid_extent(case)
-    surface, depth = upper[1], upper[1] - lower[1]
+    # The vertical is the last axis (y in 2D, z in 3D).
+    surface, depth = upper[-1], upper[-1] - lower[-1]
     spacing = case["particles"]["spacing"]
     density, g = case["fluid"]["density"], gravity(case)
     all_frames = read_frames(path)
@@ -184,7 +198,7 @@ def hydrostatic_pressure_error(path, case, settle_time):
         raise ValueError(f"no frame after t = {settle_time}")
     first = all_frames[0]
     fluid = first["kind"] == FLUID
-    y0 = first["position"][:, 1]
+    y0 = first["position"][:, -1]
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
     interior = fluid & (y0 < surface - spacing)
     scale = density * g * depth
@@ -207,10 +221,10 @@ def hydrostatic_pressure_error(path, case, settle_time):
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
     speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
-    floor = lower[1]
+    floor = lower[-1]
 
     def column_height(frame):
-        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, 1] - floor))
+        return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, -1] - floor))
 
     height = np.mean([column_height(f) for f in selected]) / column_height(first) - 1.0
     return {"bottom": float(mean_error[bottom].mean()),
@@ -239,10 +253,9 @@ def escaped(path, lower, upper):
 
 def solid_series(path, body):
     """A body's per-step series (time, volume_error, centroid, fluid_force, ...)."""
-    import h5py
-    with h5py.File(path, "r") as handle:
-        group = handle["solids"][body]
-        return {key: group[key][()] for key in group if key != "springs"}
+    with open_result(path) as result:
+        group = result.bodies[body]
+        return {key: group[key] for key in group if key != "springs"}
 
 
 def volume_error(path, case):
@@ -275,16 +288,11 @@ def lattice_top_middle(body):
 
 def tip_trajectory(path, case):
     """Time and y of the first body's top-row middle node, frame by frame."""
-    import h5py
     body = case["body"][0]
     name, node = body["name"] or "body0", lattice_top_middle(body)
-    times, ys = [], []
-    with h5py.File(path, "r") as handle:
-        for frame in sorted(handle["frames"]):
-            group = handle["frames"][frame]
-            times.append(group.attrs["time"])
-            ys.append(group[f"solids/{name}/position"][node, 1])
-    return np.array(times), np.array(ys)
+    with open_result(path) as result:
+        ys = [frame.bodies[name]["position"][node, 1] for frame in result.frames]
+        return result.frames.times, np.array(ys)
 
 
 def clamped_plate_deflection(path, case, settle_time, body="plate"):
@@ -302,8 +310,6 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
     frames), ``span``, ``load`` (q), ``bending_stiffness`` (D) and the series ``time`` and
     ``series``.
     """
-    import h5py
-
     from parmps.solids.mass_spring.build import lattice_geometry, node_set
     from parmps.solids.mass_spring.elastic import plane_modulus, REPRESENTABLE_POISSON
 
@@ -334,14 +340,10 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
     g = gravity(case)
     load = g * (case["fluid"]["density"] * (upper[1] - lower[1]) + spec["density"] * thickness)
     expected = load * span ** 4 / (384.0 * bending)
-    times, deflection = [], []
-    with h5py.File(path, "r") as handle:
-        for frame in sorted(handle["frames"]):
-            group = handle["frames"][frame]
-            times.append(group.attrs["time"])
-            y = group[f"solids/{body}/position"][column, 1]
-            deflection.append(-float(np.mean(y - rest[column, 1])))
-    times, deflection = np.array(times), np.array(deflection)
+    with open_result(path) as result:
+        times = result.frames.times
+        deflection = np.array([-float(np.mean(frame.bodies[body]["position"][column, 1] -
+                                              rest[column, 1])) for frame in result.frames])
     mean = window_mean(times, deflection, settle_time, times[-1])
     settled = deflection[times >= settle_time]
     return {"deflection": mean, "expected": float(expected),
@@ -360,11 +362,10 @@ def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate
     horizontal opening and when), dy_max (the largest rise), crossings (their total),
     volume_error (largest |A - A0|/A0) and end (the last step's time).
     """
-    import h5py
     time, value = read_probe(path, probe)
-    with h5py.File(path, "r") as handle:
-        total = handle["checks"][check]["total"][()]
-        end = float(handle["diagnostics"]["time"][-1])
+    with open_result(path) as result:
+        total = result.checks[check]["total"]
+        end = float(result.diagnostics["time"][-1])
     error = float(np.abs(solid_series(path, body)["volume_error"]).max())
     peak = int(np.argmax(value[:, 0]))
     return {"time": time, "dx": value[:, 0], "dy": value[:, 1],
@@ -412,10 +413,8 @@ def inflow_rate(case):
 
 def read_probe(path, name):
     """(time, value) of the probe ``name`` in a result file; ``value`` in SI units."""
-    import h5py
-    with h5py.File(path, "r") as handle:
-        group = handle["probes"][name]
-        return group["time"][()], group["value"][()]
+    with open_result(path) as result:
+        return result.probes[name]["time"], result.probes[name]["value"]
 
 
 def window_mean(t, value, start, end):
@@ -461,7 +460,7 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
     lower, upper = fluid_extent(case)
     height = upper[1] - lower[1]
     g = gravity(case)
-    time_scale = math.sqrt(g / height)
+    time_scale = column_time_scale(case)
     pressure_scale = case["fluid"]["density"] * g * height
     out = {}
     for name, reference in references.items():
@@ -482,5 +481,45 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
                "nan_fraction": float(np.mean(~np.isfinite(p)))}
         row["arrival_error"] = row["arrival"] - row["arrival_measured"]
         row["mean_error"] = row["mean"] / row["mean_measured"] - 1.0
+        out[name] = row
+    return out
+
+
+def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=500.0,
+                            peak_width=0.01, peak_until=None, arrival_sensors=()):
+    """Pressure probes against a record of the same sensors in SI units (SPHERIC Test 2).
+
+    ``reference``: a CSV whose first column is the time [s] and whose others are named
+    after the probes (gauge pressure [Pa]). ``windows``: probe name -> list of
+    ``[start, end]`` [s] over which the time-averaged pressure is compared. Per probe:
+    ``arrival`` (the first time above ``arrival_threshold`` [Pa]) for ``arrival_sensors``,
+    ``means`` (simulated, measured, relative difference per window) and ``peak``: the
+    largest ``peak_width``-second running mean up to ``peak_until`` (default the run's
+    end), with its time, beside the record's.
+    """
+    table = reference_table(reference)
+    te = list(table.values())[0]
+    out = {}
+    for name, spans in windows.items():
+        t, p = read_probe(path, name)
+        pe = table[name]
+        until = t[-1] if peak_until is None else peak_until
+        smooth, smooth_e = running_mean(t, p, peak_width), running_mean(te, pe, peak_width)
+        k = int(np.argmax(np.where(t <= until, smooth, -np.inf)))
+        ke = int(np.argmax(np.where(te <= until, smooth_e, -np.inf)))
+        row = {"peak": float(smooth[k]), "peak_time": float(t[k]),
+               "peak_measured": float(smooth_e[ke]), "peak_time_measured": float(te[ke]),
+               "nan_fraction": float(np.mean(~np.isfinite(p))), "means": []}
+        for start, end in spans:
+            # Dry samples carry no load on a wall: a NaN reading counts as 0 Pa.
+            mean = window_mean(t, np.nan_to_num(p, nan=0.0), start, end)
+            measured = window_mean(te, pe, start, end)
+            row["means"].append({"window": [start, end], "mean": mean,
+                                 "mean_measured": measured,
+                                 "error": mean / measured - 1.0})
+        if name in arrival_sensors:
+            row["arrival"] = first_crossing(t, p, arrival_threshold)
+            row["arrival_measured"] = first_crossing(te, pe, arrival_threshold)
+            row["arrival_error"] = row["arrival"] - row["arrival_measured"]
         out[name] = row
     return out

@@ -1,4 +1,4 @@
-"""Checks of parmps.parallel.slabs, run on every rank of a job.
+"""Checks of the domain decompositions (parmps.parallel), run on every rank of a job.
 
 Usage: mpirun -n N python tests/mpi/decomposition_worker.py checks RESULT.json
        mpirun -n N python tests/mpi/decomposition_worker.py abort
@@ -7,6 +7,11 @@ Usage: mpirun -n N python tests/mpi/decomposition_worker.py checks RESULT.json
 pass or fail together), and rank 0 writes {check name: null or the failure} to
 RESULT.json. An unexpected exception aborts the whole job. ``abort`` raises on
 the last rank while the others wait in a barrier: the job must end, not hang.
+
+Most checks run once per set-up (``SETUPS``: slabs in 2D, blocks in 2D, blocks
+in 3D on synthetic positions) and know a
+decomposition only through its interface: ``owner``, ``box``, ``neighbours``.
+Their brute-force answers come from the global scene, which every rank holds.
 
 The checks also run on one rank inside pytest (tests/test_decomposition.py).
 """
@@ -18,7 +23,8 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps import config, schema
-from parmps.parallel.slabs import SlabDecomposition, by_id_blocks
+from parmps.parallel import decomposition_class
+from parmps.parallel.exchange import by_id_blocks
 from parmps.errors import CaseError
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
 from parmps.parallel.mpi import abort_on_exception, agree, assert_all
@@ -26,29 +32,45 @@ from parmps.parallel.mpi import abort_on_exception, agree, assert_all
 SPACING = 1.0
 HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
 
+# name -> (decomposition, dimension, the domain's extent across x (y, and z in 3D)).
+# The blocks' domains are square enough for the rank grid to cut y (and z).
+SETUPS = {"slabs": ("slabs", 2, 10.0), "blocks": ("blocks", 2, 30.0),
+          "blocks3d": ("blocks", 3, 24.0)}
 
-def make_case(lower_x, upper_x, **parallel):
+
+def make_case(lower_x, upper_x, setup="slabs", **parallel):
     """A case with the default halo; strict migration (no margin) unless asked."""
+    name, dimension, across = SETUPS[setup]
     parallel.setdefault("migration_margin", 0.0)
+    parallel["decomposition"] = name
     return schema.validate({
-        "domain": {"lower": [lower_x, 0.0], "upper": [upper_x, 10.0]},
+        "domain": {"lower": [lower_x] + [0.0] * (dimension - 1),
+                   "upper": [upper_x] + [across] * (dimension - 1)},
         "particles": {"spacing": SPACING},
         "time": {"end": 1.0},
         "parallel": parallel,
     })
 
 
+def build_decomposition(comm, case):
+    return decomposition_class(case["parallel"]["decomposition"])(comm, case)
+
+
 def scene(position, kind=None):
     """A global scene with ids 0..N-1 whose velocity and pressure encode the id."""
-    n = len(position)
+    n, d = position.shape
     ids = np.arange(n, dtype=np.int64)
     return Particles({
         "id": ids,
         "kind": np.full(n, FLUID, np.int8) if kind is None else kind,
         "position": position,
-        "velocity": np.column_stack([ids * 1.0, -ids * 2.0]),
+        "velocity": _encoded_velocity(ids, d),
         "pressure": ids * 0.25,
     })
+
+
+def _encoded_velocity(ids, dimension):
+    return np.column_stack([ids * (1.0 - 3.0 * k) for k in range(dimension)])
 
 
 def lattice(nx, ny, x0=0.0):
@@ -56,9 +78,11 @@ def lattice(nx, ny, x0=0.0):
     return np.column_stack([x0 + (i.ravel() + 0.5) * SPACING, (j.ravel() + 0.5) * SPACING])
 
 
-def random_scene(n, x_max, seed=1):
+def random_scene(n, x_max, seed=1, setup="slabs"):
+    _, dimension, across = SETUPS[setup]
     rng = np.random.default_rng(seed)
-    return scene(np.column_stack([rng.uniform(0.0, x_max, n), rng.uniform(0.0, 10.0, n)]))
+    return scene(np.column_stack([rng.uniform(0.0, x_max, n)]
+                                 + [rng.uniform(0.0, across, n) for _ in range(dimension - 1)]))
 
 
 def all_ids(comm, particles):
@@ -71,14 +95,16 @@ def check_ownership(comm, decomposition, particles, n_total, what):
     assert_all(comm, np.array_equal(np.sort(ids), np.arange(n_total)),
                lambda: f"{what}: global ids are not exactly 0..{n_total - 1}: "
                        f"{len(ids)} ids, {len(np.unique(ids))} distinct")
-    x = particles.position[:particles.n_owned, 0]
-    lo, hi = decomposition.slab
-    assert_all(comm, np.all((x >= lo) & (x < hi)),
-               lambda: f"{what}: owned x outside this rank's slab [{lo}, {hi})")
+    position = particles.position[:particles.n_owned]
+    lo, hi = decomposition.box(comm.rank)
+    assert_all(comm, np.all((position >= lo) & (position < hi)),
+               lambda: f"{what}: owned positions outside this rank's box [{lo}, {hi})")
+    assert_all(comm, np.all(decomposition.owner(position) == comm.rank),
+               f"{what}: owner() disagrees with the box")
     own = particles.id[:particles.n_owned]
     assert_all(comm, np.all(np.diff(own) > 0), f"{what}: owned ids not ascending")
     assert_all(comm, np.allclose(particles.velocity[:particles.n_owned],
-                                 np.column_stack([own * 1.0, -own * 2.0])),
+                                 _encoded_velocity(own, position.shape[1])),
                f"{what}: velocity did not travel with its particle")
 
 
@@ -87,7 +113,7 @@ def check_ownership(comm, decomposition, particles, n_total, what):
 def check_distribute_counts(comm):
     """Known lattices give known per-rank counts and edges between columns."""
     expected = {1: [120], 2: [60, 60], 3: [40, 40, 40]}
-    decomposition = SlabDecomposition(comm, make_case(0.0, 24.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 24.0))
     mine = decomposition.distribute(scene(lattice(24, 5)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
@@ -99,7 +125,7 @@ def check_distribute_counts(comm):
     check_ownership(comm, decomposition, mine, 120, "24x5 lattice")
     # 25 columns of 4: the edges go to the column gap nearest each quantile.
     expected = {1: [100], 2: [48, 52], 3: [32, 36, 32]}
-    decomposition = SlabDecomposition(comm, make_case(0.0, 25.0))
+    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 25.0))
     mine = decomposition.distribute(scene(lattice(25, 4)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
@@ -108,29 +134,49 @@ def check_distribute_counts(comm):
     check_ownership(comm, decomposition, mine, 100, "25x4 lattice")
 
 
-def _expected_ghosts(decomposition, global_x, rank):
-    """Ghost ids of ``rank`` by brute force: left neighbour's then right neighbour's, by id."""
-    owner = decomposition.owner(global_x)
-    edges = decomposition.edges
-    ids = np.arange(len(global_x))
-    from_left = ids[(owner == rank - 1) & (edges[rank] - global_x < decomposition.halo_width)] \
-        if rank > 0 else ids[:0]
-    from_right = ids[(owner == rank + 1)
-                     & (global_x - edges[rank + 1] < decomposition.halo_width)] \
-        if rank < decomposition.size - 1 else ids[:0]
-    return np.concatenate([from_left, from_right])
+def check_block_counts(comm):
+    """A square lattice splits into equal blocks; a 2 x 2 grid on four ranks."""
+    for dimension in (2, 3):
+        n = 24
+        axes = np.meshgrid(*[np.arange(n) + 0.5] * dimension, indexing="ij")
+        position = np.column_stack([a.ravel() for a in axes]) * SPACING
+        case = make_case(0.0, 24.0, "blocks" if dimension == 2 else "blocks3d")
+        case["domain"]["upper"] = [24.0] * dimension
+        blocks = build_decomposition(comm, case)
+        mine = blocks.distribute(scene(position))
+        expected_grid = {1: (1,), 2: (2, 1), 3: (3, 1), 4: (2, 2)}.get(comm.size)
+        if expected_grid is not None:
+            grid = expected_grid + (1,) * (dimension - len(expected_grid))
+            assert_all(comm, blocks.grid == grid, f"{dimension}D: grid {blocks.grid}, "
+                                                  f"expected {grid}")
+            counts = list(blocks.counts(mine))
+            assert_all(comm, counts == [n ** dimension // comm.size] * comm.size,
+                       f"{dimension}D {n}^d lattice: counts {counts}")
+        check_ownership(comm, blocks, mine, n ** dimension, f"{dimension}D lattice")
 
 
-def check_halo(comm):
-    """Ghosts are exactly the neighbours' particles within the halo width, in a fixed order."""
-    global_scene = random_scene(1500, 30.0, seed=2)
+def _expected_ghosts(decomposition, global_position, rank):
+    """Ghost ids of ``rank`` by brute force: every other rank's particles within the halo
+    width of this rank's box, by owner rank, then by id."""
+    owner = decomposition.owner(global_position)
+    lo, hi = decomposition.box(rank)
+    h = decomposition.halo_width
+    near = np.all((global_position > lo - h) & (global_position < hi + h), axis=1)
+    ids = np.flatnonzero(near & (owner != rank))
+    return ids[np.lexsort((ids, owner[ids]))]
+
+
+def check_halo(comm, setup):
+    """Ghosts are exactly the other ranks' particles within the halo width of this rank's
+    box (corners included), in a fixed order, and every neighbour within re is there."""
+    global_scene = random_scene(1500 * SETUPS[setup][1] ** 2 // 4, 30.0, seed=2, setup=setup)
     # Some particles exactly at the halo distance and on lattice-like repeated x.
     global_scene.position[:40, 0] = np.repeat(np.linspace(5.0, 25.0, 10), 4)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    decomposition = build_decomposition(comm, make_case(0.0, 30.0, setup))
     mine = decomposition.distribute(global_scene)
     halo = decomposition.build_halo(mine)
     n = halo.n_owned
-    expected = _expected_ghosts(decomposition, global_scene.position[:, 0], comm.rank)
+    expected = _expected_ghosts(decomposition, global_scene.position, comm.rank)
     assert_all(comm, n == mine.n_owned and halo.n_ghost == decomposition.n_ghost,
                "build_halo changed n_owned or miscounted ghosts")
     assert_all(comm, np.array_equal(halo.id[n:], expected),
@@ -155,12 +201,24 @@ def check_halo(comm):
     # A second build_halo from the halo'd Particles drops the old ghosts first.
     again = decomposition.build_halo(halo)
     assert_all(comm, np.array_equal(again.id, halo.id), "build_halo is not idempotent")
+    # Ghosts come from neighbours only; with a cut along two axes some come across a corner.
+    owner = decomposition.owner(global_scene.position)
+    sources = set(owner[halo.id[n:]].tolist())
+    assert_all(comm, sources <= set(decomposition.neighbours),
+               f"ghosts from {sorted(sources)}, neighbours {decomposition.neighbours}")
+    grid = getattr(decomposition, "grid", (comm.size,))
+    if sum(g > 1 for g in grid) >= 2:
+        mine_box = np.array(decomposition.box(comm.rank))
+        diagonal = [r for r in sources if np.sum(np.any(
+            np.array(decomposition.box(r)) != mine_box, axis=0)) >= 2]
+        assert_all(comm, len(diagonal) > 0, f"no ghosts across a corner (grid {grid})")
 
 
-def check_refresh(comm):
+def check_refresh(comm, setup):
     """refresh() copies the owners' current values into the ghosts, in place, any dtype/shape."""
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
-    halo = decomposition.build_halo(decomposition.distribute(random_scene(1500, 30.0, seed=3)))
+    decomposition = build_decomposition(comm, make_case(0.0, 30.0, setup))
+    halo = decomposition.build_halo(decomposition.distribute(
+        random_scene(1500, 30.0, seed=3, setup=setup)))
     n, ids = halo.n_owned, halo.id
     total = len(halo)
     values = np.full(total, np.nan)
@@ -212,57 +270,59 @@ def check_refresh(comm):
                "refresh accepted an array of the wrong length")
 
 
-def _moved_x(x, ids, edges, pattern):
+def _moved(position, ids, decomposition, pattern):
     """A deterministic motion of every particle (the same on every rank)."""
-    x = x.copy()
-    interior = edges[1:-1]
+    position = position.copy()
+    d = position.shape[1]
+    lower, upper = decomposition.lower, decomposition.upper
     if pattern == "small":
-        x += np.where(ids % 3 == 0, 0.7, np.where(ids % 3 == 1, -0.45, 0.0))
-    else:  # jumps over several slabs, and particles exactly on the edges
-        span = edges[-1] - edges[0]
-        x = np.where(ids % 4 == 0, edges[-1] - x + edges[0], x)   # mirror: far jumps
-        x = np.where(ids % 4 == 1, x + 0.5 * span, x)
-        if len(interior):
-            on_edge = ids % 37 == 0
-            x[on_edge] = interior[ids[on_edge] % len(interior)]
-    return x
+        step = np.where(ids % 3 == 0, 0.7, np.where(ids % 3 == 1, -0.45, 0.0))
+        position += step[:, None] * (1.0 - 0.5 * np.arange(d))
+    else:  # jumps over several regions, and particles exactly on the boxes' corners
+        span = upper - lower
+        mirror = ids % 4 == 0
+        position[mirror] = upper + lower - position[mirror]
+        position[ids % 4 == 1] += 0.5 * span
+        on_corner = np.flatnonzero(ids % 37 == 0)
+        for i in on_corner:
+            lo, _ = decomposition.box(int(ids[i] % decomposition.size))
+            position[i] = np.where(np.isfinite(lo), lo, position[i])
+    return position
 
 
-def check_migrate(comm):
+def check_migrate(comm, setup):
     """Migration keeps every id exactly once and delivers each to its new owner."""
     for pattern in ("small", "far"):
-        global_scene = random_scene(2000, 30.0, seed=4)
-        decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+        global_scene = random_scene(2000, 30.0, seed=4, setup=setup)
+        decomposition = build_decomposition(comm, make_case(0.0, 30.0, setup))
         mine = decomposition.distribute(global_scene)
         halo = decomposition.build_halo(mine)
-        edges = decomposition.edges
-        new_x = _moved_x(global_scene.position[:, 0], global_scene.id, edges, pattern)
-        halo.position[:, 0] = new_x[halo.id]
+        new = _moved(global_scene.position, global_scene.id, decomposition, pattern)
+        halo.position[:] = new[halo.id]
         migrated = decomposition.migrate(halo)
         assert_all(comm, migrated.n_ghost == 0, "migrate kept ghosts")
         check_ownership(comm, decomposition, migrated, 2000, f"migrate ({pattern})")
-        expected = np.flatnonzero(decomposition.owner(new_x) == comm.rank)
+        expected = np.flatnonzero(decomposition.owner(new) == comm.rank)
         assert_all(comm, np.array_equal(migrated.id, expected),
                    f"migrate ({pattern}): owned ids differ from the brute-force owners")
-        assert_all(comm, np.array_equal(migrated.position[:, 0], new_x[migrated.id]),
+        assert_all(comm, np.array_equal(migrated.position, new[migrated.id]),
                    f"migrate ({pattern}): positions corrupted")
-        if pattern == "far" and comm.size > 1:
-            on_edge = np.flatnonzero(global_scene.id % 37 == 0)
-            mine_on_edge = np.intersect1d(migrated.id, on_edge)
-            counted = comm.allreduce(len(mine_on_edge))
-            assert_all(comm, counted == len(on_edge), "a particle on an edge is owned "
-                                                      f"{counted} times for {len(on_edge)}")
-            right = decomposition.owner(new_x[mine_on_edge])
-            assert_all(comm, np.all(right == comm.rank), "edge particle not with the right slab")
 
 
-def check_rebalance(comm):
+def _boxes(decomposition):
+    return np.array([decomposition.box(r) for r in range(decomposition.size)])
+
+
+def check_rebalance(comm, setup):
     """A skewed load comes back within the tolerance at once; a balanced one is left alone."""
     tolerance = 1.10
-    global_scene = random_scene(6000, 60.0, seed=5)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    global_scene = random_scene(6000, 60.0, seed=5, setup=setup)
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 60.0, setup, rebalance_interval=4))
     mine = decomposition.distribute(global_scene)
     mine.position[:, 0] = 60.0 * (mine.position[:, 0] / 60.0) ** 3
+    if SETUPS[setup][1] > 2:  # skewed along z too
+        mine.position[:, 2] = SETUPS[setup][2] * (mine.position[:, 2] / SETUPS[setup][2]) ** 2
     mine = decomposition.migrate(mine)
     before = decomposition.imbalance(mine)
     if comm.size > 1:
@@ -276,41 +336,44 @@ def check_rebalance(comm):
     assert_all(comm, decomposition.rebalance_count == (1 if comm.size > 1 else 0),
                f"{decomposition.rebalance_count} rebalances, expected one")
     check_ownership(comm, decomposition, balanced, 6000, "rebalance")
-    edges = decomposition.edges.copy()
+    boxes = _boxes(decomposition)
     again = decomposition.rebalance(balanced, step=8)
-    assert_all(comm, np.array_equal(edges, decomposition.edges)
+    assert_all(comm, np.array_equal(boxes, _boxes(decomposition))
                and np.array_equal(again.id, balanced.id), "a balanced load was rebalanced")
 
 
-def check_rebalance_projection(comm):
+def check_rebalance_projection(comm, setup):
     """Within the tolerance but drifting: a periodic check rebalances ahead of the crossing."""
-    global_scene = random_scene(6000, 60.0, seed=8)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 60.0, rebalance_interval=4))
+    global_scene = random_scene(6000, 60.0, seed=8, setup=setup)
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 60.0, setup, rebalance_interval=4))
     mine = decomposition.distribute(global_scene)
     mine = decomposition.rebalance(mine, step=4)  # balanced: the drift is measured from here
     assert_all(comm, decomposition.rebalance_count == 0, "a balanced load was rebalanced")
     if comm.size == 1:
         return
-    # Move 6 % of the mean load from the last slab into the first: imbalance 1.06.
+    # Move 6 % of the mean load from the last region into the first: imbalance 1.06.
     mean = 6000 // comm.size
-    last = np.flatnonzero(decomposition.owner(global_scene.position[:, 0]) == comm.size - 1)
+    last = np.flatnonzero(decomposition.owner(global_scene.position) == comm.size - 1)
     moved = last[:int(0.06 * mean)]
     here = np.isin(mine.id, moved)
-    mine.position[here, 0] = decomposition.edges[1] - 1.0 - 4.0 * mine.id[here] / 6000.0
+    corner = decomposition.box(0)[1]  # into rank 0's box, within a margin of its corner
+    inward = corner[None, :] - 1.0 - 4.0 * mine.id[here, None] / 6000.0
+    mine.position[here] = np.where(np.isfinite(corner), inward, mine.position[here])
     mine = decomposition.migrate(mine)
     imbalance = decomposition.imbalance(mine)
     assert_all(comm, abs(imbalance - 1.06) < 1e-9, f"set-up: imbalance {imbalance}")
-    edges = decomposition.edges.copy()
+    boxes = _boxes(decomposition)
     mine = decomposition.rebalance(mine, step=5)  # within tolerance, not periodic: nothing
-    assert_all(comm, np.array_equal(edges, decomposition.edges), "rebalanced within tolerance "
-                                                                  "off the interval")
+    assert_all(comm, np.array_equal(boxes, _boxes(decomposition)), "rebalanced within "
+                                                                    "tolerance off the interval")
     mine = decomposition.rebalance(mine, step=8)  # 1.06 + 0.06 projected > 1.10: act
     assert_all(comm, decomposition.rebalance_count == 1, "the drift was not anticipated")
     assert_all(comm, decomposition.imbalance(mine) < 1.02, "rebalance left the load uneven")
     check_ownership(comm, decomposition, mine, 6000, "projected rebalance")
 
 
-def check_sweep(comm):
+def check_sweep(comm, setup):
     """Water moving from one end of a tank to the other stays within 110 % with rebalancing."""
     nx, ny, layers, interval = 120, 24, 4, 5
     tank = lattice(nx + 2 * layers, ny + layers, x0=-layers)
@@ -324,8 +387,8 @@ def check_sweep(comm):
     kind[:len(walls)][np.abs(walls[:, 0] - nx / 2) > nx / 2 + 2] = DUMMY
     global_scene = scene(position, kind)
     n_total, n_walls = len(position), len(walls)
-    decomposition = SlabDecomposition(
-        comm, make_case(-layers, nx + layers, rebalance_interval=interval))
+    decomposition = build_decomposition(
+        comm, make_case(-layers, nx + layers, setup, rebalance_interval=interval))
     mine = decomposition.distribute(global_scene)
     worst_checked = worst = 1.0
     for step in range(1, 451):
@@ -360,10 +423,13 @@ def _errors(comm, action):
     return None
 
 
-def check_refusals(comm):
-    """Too many ranks or too thin slabs: the same CaseError on every rank."""
-    # A domain 5 wide holds one slab of the 3.7-wide halo.
-    message = _errors(comm, lambda: SlabDecomposition(comm, make_case(0.0, 5.0)))
+def check_refusals(comm, setup):
+    """Too many ranks or too thin regions: the same CaseError on every rank."""
+    build = build_decomposition
+    # A 5 x 5 domain holds one region of the 3.7-wide halo.
+    small = make_case(0.0, 5.0, setup)
+    small["domain"]["upper"] = [5.0] * SETUPS[setup][1]
+    message = _errors(comm, lambda: build(comm, small))
     messages = comm.allgather(message)
     if comm.size > 1:
         assert_all(comm, message is not None and len(set(messages)) == 1,
@@ -372,34 +438,36 @@ def check_refusals(comm):
     else:
         assert_all(comm, message is None, f"one rank refused: {message}")
     # Room for the slabs, but every particle in one narrow band: interior slabs too thin.
-    band = scene(np.column_stack([np.linspace(50.0, 51.0, 3000), np.full(3000, 5.0)]))
-    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0))
+    d = SETUPS[setup][1]
+    band = scene(np.column_stack([np.linspace(50.0, 51.0, 3000)] + [np.full(3000, 5.0)] * (d - 1)))
+    decomposition = build(comm, make_case(0.0, 100.0, setup))
     message = _errors(comm, lambda: decomposition.distribute(band))
     messages = comm.allgather(message)
-    if comm.size > 2:
+    if max(getattr(decomposition, "grid", (comm.size,))) > 2:
         assert_all(comm, message is not None and len(set(messages)) == 1,
                    f"thin slab: messages {messages}")
         assert_all(comm, "thinner than the halo" in message, f"unclear message: {message}")
     else:  # two slabs have no interior slab: nothing is too thin
         assert_all(comm, message is None, f"refused without an interior slab: {message}")
     # After a rebalance: keep the old edges instead (a warning), never fail.
-    decomposition = SlabDecomposition(comm, make_case(0.0, 100.0, rebalance_interval=1))
-    mine = decomposition.distribute(random_scene(3000, 100.0, seed=6))
-    edges = decomposition.edges.copy()
+    decomposition = build(comm, make_case(0.0, 100.0, setup, rebalance_interval=1))
+    mine = decomposition.distribute(random_scene(3000, 100.0, seed=6, setup=setup))
+    boxes = _boxes(decomposition)
     mine.position[:, 0] = 50.0 + mine.id / 3000.0
     mine = decomposition.rebalance(decomposition.migrate(mine), step=1)
-    if comm.size > 2:
-        assert_all(comm, np.array_equal(edges, decomposition.edges),
-                   "a rebalance made slabs thinner than the halo")
+    if max(getattr(decomposition, "grid", (comm.size,))) > 2:
+        assert_all(comm, np.array_equal(boxes, _boxes(decomposition)),
+                   "a rebalance made regions thinner than the halo")
     check_ownership(comm, decomposition, mine, 3000, "refused rebalance")
 
 
-def check_empty_rank(comm):
+def check_empty_rank(comm, setup):
     """A rank with no particles still takes part in every collective call."""
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0, rebalance_interval=1))
-    mine = decomposition.distribute(random_scene(600, 30.0, seed=7))
-    # Everything moves to the first slab: the other ranks end up empty.
-    mine.position[:, 0] = 0.01 * mine.id / 600.0
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 30.0, setup, rebalance_interval=1))
+    mine = decomposition.distribute(random_scene(600, 30.0, seed=7, setup=setup))
+    # Everything moves into the first region's corner: the other ranks end up empty.
+    mine.position[:] = 0.01 * mine.id[:, None] / 600.0
     mine = decomposition.migrate(mine)
     halo = decomposition.build_halo(mine)
     decomposition.refresh([halo.pressure, halo.velocity])
@@ -412,7 +480,7 @@ def check_empty_rank(comm):
 def check_by_id_blocks(comm):
     """Regrouping by id blocks gives one id-sorted array in rank order, for output."""
     global_scene = random_scene(1000, 30.0, seed=9)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 30.0))
+    decomposition = build_decomposition(comm, make_case(0.0, 30.0))
     halo = decomposition.build_halo(decomposition.distribute(global_scene))
     block, offset, total = by_id_blocks(halo, comm)
     ids = all_ids(comm, block)
@@ -460,23 +528,25 @@ def check_agree(comm):
     assert_all(comm, failed == "rank 0: rank 0 says no", f"assert_all raised {failed!r}")
 
 
-def check_lazy_migration(comm):
+def check_lazy_migration(comm, setup):
     """With a margin, particles stray up to it before migrating, and the halo stays complete."""
     margin = 0.5
-    global_scene = random_scene(2000, 40.0, seed=10)
-    decomposition = SlabDecomposition(comm, make_case(0.0, 40.0, migration_margin=margin))
+    global_scene = random_scene(2000, 40.0, seed=10, setup=setup)
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 40.0, setup, migration_margin=margin))
     assert_all(comm, decomposition.halo_width == HALO + margin
-               and decomposition.min_slab_width == HALO + 2 * margin, "halo/slab widths")
+               and decomposition.min_width == HALO + 2 * margin, "halo/region widths")
     mine = decomposition.distribute(global_scene)
     position = global_scene.position.copy()
-    # Everyone moves by +-0.45: some leave their slab, none by more than the margin.
-    position[:, 0] += np.where(global_scene.id % 2 == 0, 0.45, -0.45)
+    # Everyone moves by +-0.45 along every axis: some leave their region, none by more
+    # than the margin.
+    position += np.where(global_scene.id % 2 == 0, 0.45, -0.45)[:, None]
     mine.position[:] = position[mine.id]
     before = mine.id.copy()
     mine = decomposition.migrate(decomposition.build_halo(mine))
     assert_all(comm, np.array_equal(mine.id, before) and decomposition.migration_count == 0,
                "particles within the margin migrated")
-    strays = np.count_nonzero(decomposition.owner(mine.position[:, 0]) != comm.rank)
+    strays = np.count_nonzero(decomposition.owner(mine.position) != comm.rank)
     if comm.size > 1:
         assert_all(comm, comm.allreduce(strays) > 0, "the test moved nobody out of a slab")
     # The halo covers every neighbour of the strays too.
@@ -491,9 +561,11 @@ def check_lazy_migration(comm):
         missing += sum(1 for j in near.tolist() if j not in local)
     assert_all(comm, missing == 0, f"{missing} neighbours of owned particles missing")
     # One particle goes past the margin: every stray migrates, ownership is strict again.
-    first = int(np.argmin(position[:, 0]))  # owned by rank 0
+    first = int(np.flatnonzero(decomposition.owner(global_scene.position) == 0)[0])
     if comm.size > 1:
-        position[first, 0] = decomposition.edges[1] + margin + 0.2
+        upper = decomposition.box(0)[1]
+        axis = int(np.flatnonzero(np.isfinite(upper))[0])
+        position[first, axis] = upper[axis] + margin + 0.2
     halo.position[:halo.n_owned] = position[halo.id[:halo.n_owned]]
     mine = decomposition.migrate(halo)
     if comm.size > 1:
@@ -501,17 +573,32 @@ def check_lazy_migration(comm):
     check_ownership(comm, decomposition, mine, 2000, "lazy migration")
 
 
-CHECKS = {
-    "distribute_counts": check_distribute_counts,
+# Checks of one decomposition through its interface, run for every set-up.
+GENERIC = {
     "halo": check_halo,
     "refresh": check_refresh,
     "migrate": check_migrate,
     "lazy_migration": check_lazy_migration,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
-    "sweep": check_sweep,
     "refusals": check_refusals,
     "empty_rank": check_empty_rank,
+}
+# The sweep's tank is 2D.
+SWEEPS = {"slabs:sweep": lambda comm: check_sweep(comm, "slabs"),
+          "blocks:sweep": lambda comm: check_sweep(comm, "blocks")}
+
+
+def _bind(check, setup):
+    return lambda comm: check(comm, setup)
+
+
+CHECKS = {
+    "slabs:distribute_counts": check_distribute_counts,
+    "blocks:distribute_counts": check_block_counts,
+    **{f"{setup}:{name}": _bind(check, setup) for setup in SETUPS
+       for name, check in GENERIC.items()},
+    **SWEEPS,
     "by_id_blocks": check_by_id_blocks,
     "agree": check_agree,
 }

@@ -9,7 +9,8 @@ Sign convention: parmps solves ``A p = b`` with ``A = -<lap> + shift`` (symmetri
 positive definite), so every ``*_source`` here returns ``b``, the right-hand side
 of ``-<lap p>_i = b_i``: positive where the fluid is being compressed.
 
-Sources
+Sources:
+
 - HS: Khayyer & Gotoh (2009), "Modified moving particle semi-implicit methods
   for the prediction of 2D wave impact pressure", Coastal Engineering 56,
   419-440: the source is the time derivative of the number density taken
@@ -20,6 +21,7 @@ Sources
   (w''(r_ij) - w'(r_ij)/r_ij), which for w = re/r - 1 is 3 re/(n0 r_ij^3).
 - ECS: Khayyer & Gotoh (2011), "Enhancement of stability and accuracy of the
   moving particle semi-implicit method", J. Comput. Phys. 230, 3093-3118.
+
 The equation numbers of these papers could not be checked here; OpenMps
 (src/OpenMps/Computer.hpp, MPS_HS/MPS_HL/MPS_ECS) implements the same
 formulas and was read alongside.
@@ -116,6 +118,7 @@ def higher_order_laplacian_coefficient(spacing, radius, normalisation="paper", d
     - "lattice": 2d / sum_j re/|r_ij| over the initial lattice, so that the
       operator is exact for quadratic fields on it (the role lambda0 plays in the
       standard Laplacian).
+
     ``n0`` is the lattice number density at ``radius``.
     """
     n0, _, inverse_distance_sum, _ = lattice_sums(spacing, radius, dimension)

@@ -7,20 +7,41 @@ run is made (``[run]``), settings of scripts/study.py's sweeps (``[study]``),
 further cases it compares (``[other_cases]``) and the tolerances the tests assert
 (``[tolerance]``). Physical constants live in the case files only.
 
-The folder sits beside the package in a source checkout; ``load`` takes another
-``directory`` for a tree elsewhere.
+Where the data is: an installed package carries ``validation/``, ``cases/`` and
+``tests/cases/`` in ``parmps/_data/`` (setup.py copies them there when a wheel is
+built); a source checkout (an editable install) reads them from the repository
+itself. :data:`ROOT` is whichever holds them. ``load`` takes another ``directory``
+for a tree elsewhere.
+
+Running validations and benchmarks: :mod:`parmps.validation.command`
+(``python -m parmps validate``), :mod:`parmps.validation.bench` (``python -m parmps
+bench``), both through the one launcher :mod:`parmps.validation.launch`.
 """
 
+import math
 import os
 import tomllib
 from dataclasses import dataclass
 
 from parmps.errors import CaseError
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+DATA_FOLDERS = ("validation", "cases", os.path.join("tests", "cases"))
+
+
+def data_root():
+    """The folder holding ``validation/`` and ``cases/``: the installed package's ``_data``,
+    else the source checkout the package sits in."""
+    installed = os.path.join(PACKAGE, "_data")
+    if os.path.isdir(os.path.join(installed, "validation")):
+        return installed
+    return os.path.dirname(PACKAGE)
+
+
+ROOT = data_root()
 DIRECTORY = os.path.join(ROOT, "validation")
 FILE_NAME = "validation.toml"
-TABLES = ("metric", "run", "study", "other_cases", "tolerance")
+TABLES = ("metric", "run", "study", "other_cases", "tolerance", "judge")
 KEYS = ("case", "reference") + TABLES
 
 
@@ -37,6 +58,7 @@ class Validation:
     study: dict
     other_cases: dict
     tolerance: dict
+    judge: dict
 
     @property
     def metric_function(self):
@@ -62,6 +84,52 @@ class Validation:
         arguments = dict(self.metric_arguments, **overrides)
         return self.metric_function(result, analysis.result_case(result), **arguments)
 
+    def run_arguments(self, overrides=()):
+        """How a validation run is made, from ``[run]``: (end_time, sets). ``end_time`` is
+        ``[run] end_time`` [s], or ``until`` over the metric's time scale (``time_scale``, a
+        function of ``parmps.tools.analysis`` of the case), or None (the case's own end);
+        ``sets`` are ``[run] sets``, ``time.output_interval`` from ``[run] output_interval``
+        and ``overrides``, as ``--set`` takes them."""
+        from parmps.tools import analysis
+        run = self.run
+        sets = list(run.get("sets", []))
+        if "output_interval" in run:
+            sets.append(f"time.output_interval={run['output_interval']!r}")
+        sets += list(overrides)
+        if "end_time" in run:
+            return float(run["end_time"]), sets
+        if "until" in run:
+            scale = getattr(analysis, run["time_scale"])(self.case(sets))
+            return float(run["until"]) / scale, sets
+        return None, sets
+
+    def verdicts(self, measured):
+        """Each tolerance applied to what :meth:`measure` returned: name -> {value, tolerance,
+        pass}. A number bounds the absolute value, a pair [low, high] the value itself.
+        ``[judge]`` maps a tolerance to the metric's name for it when they differ, or to a
+        list of paths into a nested result (``"P1.means.0.error"``: keys, and indexes of
+        lists); with ``judged`` (a list of probes), each tolerance applies to every probe's
+        ``<name>_error``. Tolerances the metric does not measure (the tests judge those
+        from the run) are left out."""
+        verdicts = {}
+        for key, bound in self.tolerance.items():
+            if key == "judged" or isinstance(bound, dict):
+                continue
+            name = self.judge.get(key, key)
+            if isinstance(name, list):
+                for path in name:
+                    value = _lookup(measured, path)
+                    if isinstance(value, (int, float)):
+                        verdicts[path] = _verdict(value, bound)
+            elif "judged" in self.tolerance:
+                for probe in self.tolerance["judged"]:
+                    value = measured.get(probe, {}).get(f"{name}_error")
+                    if value is not None:
+                        verdicts[f"{probe}.{name}_error"] = _verdict(value, bound)
+            elif isinstance(measured.get(name), (int, float)):
+                verdicts[name] = _verdict(measured[name], bound)
+        return verdicts
+
     def raw_case(self, path=None):
         """The case file as parsed TOML (before validation): the base of --set overrides."""
         from parmps import config
@@ -76,6 +144,29 @@ class Validation:
         for assignment in overrides:
             config.apply_override(raw, assignment)
         return schema.validate(raw)
+
+
+def _lookup(measured, path):
+    """The item at a dotted path of a nested result (keys, and indexes of lists), or None."""
+    node = measured
+    for part in path.split("."):
+        if isinstance(node, list) and part.isdigit() and int(part) < len(node):
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        else:
+            return None
+    return node
+
+
+def _verdict(value, bound):
+    value = float(value)
+    if isinstance(bound, list):
+        passed = bound[0] <= value <= bound[1]
+    else:
+        passed = abs(value) <= bound
+    return {"value": value if math.isfinite(value) else str(value), "tolerance": bound,
+            "pass": bool(passed)}
 
 
 def names(directory=DIRECTORY):
@@ -122,6 +213,10 @@ def load(name, directory=DIRECTORY):
     if missing:
         raise CaseError(f"{path}: {missing[0]} not found")
     from parmps.tools import analysis
+    if "until" in validation.run and \
+            not callable(getattr(analysis, validation.run.get("time_scale", ""), None)):
+        raise CaseError(f"{path}: [run] until needs time_scale, a function of "
+                        f"parmps/tools/analysis.py")
     if not callable(getattr(analysis, validation.metric["function"], None)):
         raise CaseError(f"{path}: metric function '{validation.metric['function']}' is not in "
                         f"parmps/tools/analysis.py")

@@ -1,0 +1,182 @@
+"""The decomposition interface: what the solver asks of any way of cutting the domain.
+
+A decomposition assigns every particle to exactly one rank (its owner) by
+position, copies the particles near a rank's region to it as ghosts, moves
+particles to their new owners after they moved, and moves the region
+boundaries when the load drifts. The solver, the coupling, the open boundaries
+and the output talk to it only through this interface; which decomposition runs
+is the case's ``parallel.decomposition`` (see :mod:`parmps.parallel`). All
+methods are collective over ``comm`` unless they say otherwise, and run on
+every rank, including ranks that hold no particles.
+
+Contract shared by every implementation:
+
+- ``distribute(particles)``: from the global scene (the same on every rank)
+  keep the particles this rank owns; raises CaseError on every rank for a
+  layout too fine for the halo.
+- ``migrate(particles)``: drop ghosts, send owned particles that left this
+  rank's region to their owners (lazily: see ``parallel.migration_margin``);
+  returns owned-only Particles in ascending global id.
+- ``build_halo(particles)``: owned particles followed by ghosts (copies of the
+  particles of other ranks within the halo width of this rank's region); it
+  remembers what it sent, so ``refresh`` updates the same ghosts.
+- ``refresh(arrays)``: the owners' current values of per-particle arrays
+  (length n_owned + n_ghost) copied into the ghost slots, in place.
+- ``rebalance(particles, step)``: move region boundaries when the load is
+  uneven (or heading there); returns owned-only Particles.
+- ``owner(position)``: the owning rank of each row of an (n, d) array of
+  positions (local, not collective; every position has exactly one owner).
+- ``box(rank)``: the region a rank owns, as a box (local).
+- ``neighbours``: the ranks this rank exchanges ghosts with (local).
+- ``update(particles, step)``: migrate, rebalance, build the halo, in that order.
+
+Global ids never change and owned particles are kept in ascending id, so the
+results do not depend on the decomposition or the rank count beyond round-off.
+"""
+
+import abc
+import time
+
+import numpy as np
+
+from parmps.core.settings import search_radius
+from parmps.parallel.exchange import imbalance_of
+
+
+class Decomposition(abc.ABC):
+    """Common state (halo widths, load-balance settings, timers) and the shared logic."""
+
+    #: the name the case chooses it by (``parallel.decomposition``)
+    name = None
+
+    def __init__(self, comm, case):
+        self.comm = comm
+        self.size = comm.size
+        self.rank = comm.rank
+        spacing = float(case["particles"]["spacing"])
+        self.spacing = spacing
+        self.lower = np.asarray(case["domain"]["lower"], dtype=np.float64)
+        self.upper = np.asarray(case["domain"]["upper"], dtype=np.float64)
+        self.dimension = len(self.lower)
+        parallel = case["parallel"]
+        self.reach = search_radius(case)
+        self.margin = float(parallel.get("migration_margin", 0.0)) * spacing
+        # Owned particles stray up to the margin out of their region, and see up to
+        # the reach: ghosts come from within reach + margin of the region.
+        self.halo_width = self.reach + self.margin
+        # Regions at least this wide get their ghosts from adjacent regions only.
+        self.min_width = self.reach + 2.0 * self.margin
+        self.rebalance_interval = int(parallel["rebalance_interval"])
+        self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
+        self.halo_seconds = 0.0
+        self.migration_seconds = 0.0
+        self.rebalance_count = 0
+        self.migration_count = 0  # migrations that moved particles
+        self._reference = (0, 1.0)  # (step, imbalance) the load drift is measured from
+        self._refused = False  # the last rebalance was refused (too thin)
+
+    # -- the interface ------------------------------------------------------------------------
+
+    @abc.abstractmethod
+    def distribute(self, particles):
+        """Keep this rank's particles of the global scene (identical on every rank)."""
+
+    @abc.abstractmethod
+    def migrate(self, particles):
+        """Drop ghosts, send owned particles that left to their owners; owned-only, by id."""
+
+    @abc.abstractmethod
+    def build_halo(self, particles):
+        """Owned particles followed by the ghosts this rank needs."""
+
+    @abc.abstractmethod
+    def refresh(self, arrays):
+        """Copy the owners' values into the ghost slots of ``arrays``, in place."""
+
+    @abc.abstractmethod
+    def rebalance(self, particles, step):
+        """Move the region boundaries when the load is uneven; returns owned-only."""
+
+    @abc.abstractmethod
+    def owner(self, position):
+        """The rank owning each row of ``position`` ((n, d)); local."""
+
+    @abc.abstractmethod
+    def box(self, rank):
+        """(lower, upper) corners ((d,) arrays) of ``rank``'s region, +-inf where it is
+        open; regions tile space, half-open [lower, upper). Local."""
+
+    @property
+    @abc.abstractmethod
+    def neighbours(self):
+        """The ranks this rank exchanges ghosts with (a sorted list; local)."""
+
+    @property
+    @abc.abstractmethod
+    def n_ghost(self):
+        """Ghosts made by the last build_halo."""
+
+    @abc.abstractmethod
+    def describe(self):
+        """One line for the log: the layout."""
+
+    # -- shared -------------------------------------------------------------------------------
+
+    def update(self, particles, step):
+        """Everything positions changed since the last step: migrate, rebalance when due,
+        then rebuild the halo. Returns owned particles followed by current ghosts."""
+        particles = self.migrate(particles)
+        particles = self.rebalance(particles, step)
+        return self.build_halo(particles)
+
+    def counts(self, particles):
+        """Owned counts of every rank (int64 array, the same on every rank)."""
+        counts = np.empty(self.size, np.int64)
+        self.comm.Allgather(np.array([particles.n_owned], np.int64), counts)
+        return counts
+
+    def imbalance(self, particles):
+        """Largest rank's owned count over the mean (1.0 is perfect balance)."""
+        return imbalance_of(self.counts(particles))
+
+    def _positions(self, position):
+        position = np.asarray(position, dtype=np.float64)
+        if position.ndim != 2 or position.shape[1] != self.dimension:
+            raise ValueError(f"owner: positions of shape (n, {self.dimension}) expected, "
+                             f"got {position.shape}")
+        return position
+
+    def _rebalance_reason(self, counts, step):
+        """Why to rebalance now (a phrase for the log), or None; updates the drift reference.
+
+        The load (max/mean owned count) is checked at every step: above
+        ``imbalance_tolerance`` the regions are rebalanced at once (unless the
+        last attempt was refused, then only every interval). Every
+        ``rebalance_interval`` steps the drift of the load is also projected one
+        interval ahead, and a load heading past the tolerance is rebalanced
+        before it gets there.
+        """
+        tolerance = self.imbalance_tolerance
+        before = imbalance_of(counts)
+        periodic = step % self.rebalance_interval == 0
+        reason = None
+        if before > tolerance and (periodic or not self._refused):
+            reason = "over the tolerance"
+        elif periodic:
+            last_step, last_imbalance = self._reference
+            rate = max(0.0, before - last_imbalance) / max(step - last_step, 1)
+            projected = before + rate * self.rebalance_interval
+            if projected > tolerance:
+                reason = f"heading for {projected:.3f} by step {step + self.rebalance_interval}"
+        if periodic:
+            self._reference = (step, before)
+        return reason
+
+    def _timed(self, counter, function, *args):
+        """``function(*args)``, its wall time added to the counter named ``counter``."""
+        start = time.perf_counter()
+        try:
+            return function(*args)
+        finally:
+            setattr(self, counter, getattr(self, counter) + time.perf_counter() - start)
+

@@ -1,0 +1,340 @@
+"""Benchmark: the dam break at several sizes and rank counts, one JSON line per run::
+
+    python -m parmps bench [--particles N ...] [--ranks R ...] [--steps S] [--warmup W]
+                           [--set SECTION.KEY=VALUE ...]
+    python -m parmps bench --time-to-solution [--spacing L0 ...] [--ranks R ...]
+                           [--end-time T] [--set SECTION.KEY=VALUE ...]
+
+(``scripts/bench.py`` is the same command.)
+
+Each run builds cases/dam_break.toml at the spacing that gives about N particles
+(fluid, walls and dummies), takes W warm-up steps (numba compilation, first
+AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
+us_per_particle_step, a breakdown of seconds by part (the slowest rank's) and
+max_rss_mb, the peak resident memory summed over the ranks.
+``--set`` applies case overrides as parmps does (a pressure scheme, say).
+Runs with more ranks than cores oversubscribe, which the line records.
+
+``--scene dam_break_3d`` does the same with SPHERIC's 3D dam break
+(cases/dam_break_3d.toml, its tank as it is, probes left out) and adds
+``bytes_per_particle`` (max_rss over particles); with ``--time-to-solution`` it
+runs that case at 0.55/20 m (``--spacing``) to t = 0.5 s on 1 and 2 ranks against
+``TIME_TO_SOLUTION_TARGETS_3D``: half of DualSPHysics 5.4's CPU build on the same
+scene, spacing and cores, measured on one of these 2-core machines (846 s on 1 core,
+423 s on 2; 48,622 particles, 2,563 steps).
+
+``--time-to-solution`` runs cases/dam_break_2d_peer.toml (the 2D dam break of
+MPS-Basic's and DualSPHysics's examples) as a user would, ``python -m parmps``
+under mpirun, to t = 0.5 s (``--end-time``) at each spacing (5 mm and 2.5 mm by
+default) on each rank count (1 and 2), and prints per run: ``wall_seconds``, the
+loop's time (the last row of /diagnostics/wall_seconds: start-up and the final
+close are not in it), ``steps``, ``us_per_particle_step`` (the loop's time over
+particles x steps), ``ksp_iterations`` (their total), ``cpu_seconds`` (user + system
+time of the whole job, every rank, start-up included: on a shared machine it moves
+less with the load than the wall time; MPI's busy waiting counts in it on 2 ranks),
+``load`` (the 1-minute load average at the start), ``target_seconds`` and
+``within_target`` for the four runs that have a speed target
+(``TIME_TO_SOLUTION_TARGETS``, to t = 0.5 s), and the surge front:
+
+- ``front_m``: the leading edge on the floor at the end time, the largest x of the
+  fluid particles whose centres lie within ``FLOOR_BAND`` (20 mm) of the floor,
+  plus half a spacing (where the particles' volume ends), measured from the left
+  wall (:func:`parmps.tools.analysis.front`). By t = 0.5 s the surge has reached the right wall (x = 1 m) and runs up it,
+  so ``front_m`` says the water is there; ``front_rms`` is the accuracy figure:
+- ``front_rms``: the column is Martin & Moyce's n^2 = 2 (height 2a, a = 0.25 m), so
+  the surge front of every frame is compared with their record for
+  T = t sqrt(2 g / a) <= 2.8, before the front meets the right wall
+  (validation/dam_break's metric, unshifted RMS relative error).
+"""
+
+import argparse
+import json
+import math
+import os
+import resource
+import sys
+import tempfile
+
+from parmps.errors import CaseError
+from parmps.validation import ROOT
+
+CASE = os.path.join(ROOT, "cases", "dam_break.toml")
+PEER_CASE = os.path.join(ROOT, "cases", "dam_break_2d_peer.toml")
+SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_break_3d.toml")}
+# The 3D time to solution: 0.55/20 m to t = 0.5 s, half of DualSPHysics's seconds.
+SPACINGS_3D = (0.0275,)
+TIME_TO_SOLUTION_TARGETS_3D = {(0.0275, 1): 423.0, (0.0275, 2): 211.5}
+PEER_SPACINGS = (0.005, 0.0025)
+# Fluid within this height of the floor counts for the front (spray above it does not).
+FLOOR_BAND = 0.02
+# The comparison with Martin & Moyce stops before the front meets the right wall at Z = 4.
+FRONT_COMPARE_UNTIL = 2.8
+# Speed targets of --time-to-solution, (spacing, ranks) -> loop seconds to t = 0.5 s: half
+# of what the main of November 2026 (b2f74f8; density source, minimum gradient, cfl 0.2,
+# rtol 1e-8) took on a quiet 2-core AMD EPYC VM: 82, 57, 735 and 407 s. The machine's
+# timings drift by +-15 %, and by more under load: compare paired runs (README).
+TIME_TO_SOLUTION_TARGETS = {(0.005, 1): 41.0, (0.005, 2): 28.5,
+                            (0.0025, 1): 367.5, (0.0025, 2): 203.5}
+TARGET_END_TIME = 0.5
+
+
+def spacing_for(target, scene_name="dam_break"):
+    """The l0 = a/m (a the case's column width) whose dam-break scene holds closest to
+    ``target`` particles."""
+    from parmps.core import scene
+    from parmps.tools import analysis
+    if scene_name != "dam_break":
+        return _spacing_3d(target, scene_name)
+    lower, upper = analysis.fluid_extent(_case(None))
+    width, height = upper - lower
+    # The fluid alone is m x (height/width) m particles; the walls add a few percent,
+    # so only the m a little below that count are built and counted.
+    fluid_only = max(10, int(math.sqrt(target * width / height)))
+    candidates = range(int(0.85 * fluid_only), fluid_only + 1, max(1, fluid_only // 60))
+    best = None
+    for m in candidates:
+        spacing = width / m
+        total = len(scene.build(_case(spacing))[0])
+        if best is None or abs(total - target) < abs(best[1] - target):
+            best = (spacing, total)
+    return best
+
+
+def _spacing_3d(target, scene_name):
+    """The spacing whose 3D scene holds about ``target`` particles: the count goes as
+    l0^-3, corrected by building the scene twice."""
+    from parmps.core import scene
+    spacing = _case(None, scene_name=scene_name)["particles"]["spacing"]
+    total = None
+    for _ in range(3):
+        total = len(scene.build(_case(spacing, scene_name=scene_name))[0])
+        if abs(total - target) < 0.02 * target:
+            break
+        spacing *= (total / target) ** (1.0 / 3.0)
+    return spacing, total
+
+
+def _case(spacing, steps=0, overrides=(), scene_name="dam_break"):
+    from parmps import config, schema
+    with open(SCENES[scene_name], "rb") as handle:
+        raw = config.load_text(handle.read().decode())
+    for assignment in overrides:
+        config.apply_override(raw, assignment)
+    if spacing is not None:
+        raw["particles"]["spacing"] = spacing
+    if scene_name != "dam_break":
+        raw["probe"] = []
+        raw["time"]["max_steps"] = steps
+        raw.setdefault("output", {})["frames"] = False
+        return schema.validate(raw)
+    # A tank twice as tall as the column, as the run-up needs for 25 steps, keeps the
+    # count mostly fluid (the case's taller walls are for the splash at t > 0.4 s).
+    tank, domain = raw["tank"][0], raw["domain"]
+    headroom = domain["upper"][1] - tank["upper"][1]
+    column = raw["fluid_block"][0]
+    tank["upper"][1] = tank["lower"][1] + 2 * (column["upper"][1] - column["lower"][1])
+    domain["upper"][1] = tank["upper"][1] + headroom
+    raw["time"]["max_steps"] = steps
+    raw.setdefault("output", {})["frames"] = False
+    return schema.validate(raw)
+
+
+def worker(args):
+    """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
+    import time
+
+    from mpi4py import MPI
+
+    from parmps.run.observers import Callback
+    from parmps.run.simulation import Simulation
+    comm = MPI.COMM_WORLD
+    spacing = args.spacing[0]
+    case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides,
+                 scene_name=args.scene)
+    directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
+    run = Simulation(case, "", comm, directory)
+    timers = run.fluid.timers
+    decomposition = run.decomposition
+    marks = {}
+
+    def mark_warm(state):
+        if state.step == args.warmup:
+            comm.Barrier()
+            marks["start"] = time.perf_counter()
+            marks["fluid"] = dict(timers.seconds)
+            marks["halo"] = decomposition.halo_seconds
+            marks["migration"] = decomposition.migration_seconds
+
+    run.execute(extra_observers=[Callback(mark_warm)])
+    comm.Barrier()
+    seconds = time.perf_counter() - marks["start"]
+    breakdown = {part: timers.seconds[part] - marks["fluid"][part]
+                 for part in ("neighbours", "operators", "assembly", "solve", "output")}
+    breakdown["halo"] = decomposition.halo_seconds - marks["halo"]
+    breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
+    breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
+    particles = comm.allreduce(run.state.particles.n_owned)
+    # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
+    memory = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1024.0
+    if comm.rank == 0:
+        line = {
+            "particles": particles, "ranks": comm.size, "steps": args.steps,
+            "seconds": round(seconds, 4),
+            "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
+            "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
+            "max_rss_mb": round(memory, 1),
+            "bytes_per_particle": round(memory * 2 ** 20 / particles),
+            "spacing": spacing,
+            "oversubscribed": comm.size > (os.cpu_count() or 1),
+        }
+        if args.overrides:
+            line["set"] = list(args.overrides)
+        print(json.dumps(line), flush=True)
+        import shutil
+        shutil.rmtree(directory, ignore_errors=True)
+
+
+def time_to_solution(spacing, ranks, end_time, overrides, scene_name="dam_break"):
+    """One run of the peer dam break (or of ``scene_name``'s 3D case) to ``end_time``;
+    returns its JSON line as a dict."""
+    import shutil
+
+    from parmps import open_result
+    from parmps.tools import analysis
+    from parmps.validation import launch
+    out = tempfile.mkdtemp(prefix="parmps-tts-")
+    try:
+        case_file = PEER_CASE if scene_name == "dam_break" else SCENES[scene_name]
+        sets = [f"particles.spacing={spacing!r}"] + list(overrides)
+        command = launch.command(case_file, out, sets, petsc=(), ranks=ranks)
+        # Exactly the end time asked for (the launcher's own formatting rounds to 6 digits).
+        command += ["--end-time", repr(end_time)]
+        load = os.getloadavg()[0]
+        before = resource.getrusage(resource.RUSAGE_CHILDREN)
+        status, _, stderr, _ = launch.execute(command, timeout=None, cwd=ROOT, spin=True)
+        after = resource.getrusage(resource.RUSAGE_CHILDREN)
+        line = {"case": os.path.relpath(case_file, ROOT), "spacing": spacing, "ranks": ranks,
+                "end_time": end_time, "load": round(load, 2)}
+        if status != 0:
+            return dict(line, error=stderr.strip().splitlines()[-3:])
+        path = os.path.join(out, "result.h5")
+        with open_result(path) as result:
+            diagnostics = result.diagnostics
+            seconds = float(diagnostics["wall_seconds"][-1])
+            steps = int(diagnostics["step"][-1])
+            iterations = int(diagnostics["ksp_iterations"].sum())
+            case = result.case
+            last = result.frames[-1]
+            particles = len(last)
+            if scene_name == "dam_break":
+                tank = case["tank"][0]
+                line["front_m"] = round(analysis.front(
+                    last, tank["lower"][0], spacing, floor=tank["lower"][1], band=FLOOR_BAND), 4)
+        line.update({
+            "particles": particles, "wall_seconds": round(seconds, 3), "steps": steps,
+            "us_per_particle_step": round(1e6 * seconds / (particles * steps), 3),
+            "ksp_iterations": iterations,
+            "cpu_seconds": round(after.ru_utime + after.ru_stime
+                                 - before.ru_utime - before.ru_stime, 1),
+            "oversubscribed": ranks > (os.cpu_count() or 1)})
+        targets = TIME_TO_SOLUTION_TARGETS_3D
+        if scene_name == "dam_break":
+            line.update(_front_rms(path, case, end_time))
+            targets = TIME_TO_SOLUTION_TARGETS
+        target = targets.get((spacing, ranks))
+        if target is not None and end_time == TARGET_END_TIME:
+            line["target_seconds"] = target
+            line["within_target"] = seconds <= target
+        if overrides:
+            line["set"] = list(overrides)
+        return line
+    finally:
+        shutil.rmtree(out, ignore_errors=True)
+
+
+def _front_rms(path, case, end_time):
+    """The surge front against Martin & Moyce (unshifted RMS) for a run that reaches
+    FRONT_COMPARE_UNTIL; nothing for a shorter one."""
+    from parmps import validation
+    from parmps.tools import analysis
+    if end_time * analysis.dam_break_time_scale(case) < FRONT_COMPARE_UNTIL:
+        return {}
+    dam_break = validation.load("dam_break")
+    front = analysis.surge_front_error(
+        path, case, dam_break.reference, compare_until=FRONT_COMPARE_UNTIL,
+        delay_range=dam_break.metric["delay_range"], delay_step=dam_break.metric["delay_step"])
+    return {"front_rms": round(front["rms"], 4)}
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise CaseError(f"bench: {message}")
+
+
+def build_parser():
+    parser = _Parser(prog="parmps bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--particles", type=int, nargs="+", default=[2500, 10000, 40000])
+    parser.add_argument("--ranks", type=int, nargs="+",
+                        help="rank counts (default 1; 1 2 with --time-to-solution)")
+    parser.add_argument("--steps", type=int, default=20)
+    parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--set", action="append", default=[], dest="overrides",
+                        metavar="SECTION.KEY=VALUE", help="a case override, as parmps --set")
+    parser.add_argument("--time-to-solution", action="store_true",
+                        help="run cases/dam_break_2d_peer.toml to --end-time and print the "
+                             "wall time, steps, cost and front of each run")
+    parser.add_argument("--spacing", type=float, nargs="+",
+                        help="with --time-to-solution: l0 [m] (default 0.005 0.0025)")
+    parser.add_argument("--end-time", type=float, default=0.5,
+                        help="with --time-to-solution: simulated seconds (default 0.5)")
+    parser.add_argument("--scene", choices=tuple(SCENES), default="dam_break",
+                        help="dam_break (2D, the default) or dam_break_3d (SPHERIC Test 2)")
+    parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
+    return parser
+
+
+def main(argv=None):
+    """The ``bench`` command; returns the exit status."""
+    args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
+    if args.worker:
+        worker(args)
+        return 0
+    if args.time_to_solution:
+        status = 0
+        spacings = PEER_SPACINGS if args.scene == "dam_break" else SPACINGS_3D
+        for spacing in args.spacing or spacings:
+            for ranks in args.ranks or [1, 2]:
+                line = time_to_solution(spacing, ranks, args.end_time, args.overrides,
+                                        args.scene)
+                status = status or int("error" in line)
+                print(json.dumps(line), flush=True)
+        return status
+    return sizes(args)
+
+
+def sizes(args):
+    """The timed runs of the dam break at each size and rank count, one JSON line each."""
+    from parmps.parallel.mpi import mpirun_command
+    from parmps.validation import launch
+    status = 0
+    for target in args.particles:
+        spacing, _ = spacing_for(target, args.scene)
+        for ranks in args.ranks or [1]:
+            argv = [sys.executable, "-m", "parmps.validation.bench", "--worker", "--spacing",
+                    repr(spacing), "--steps", str(args.steps), "--warmup", str(args.warmup),
+                    "--scene", args.scene]
+            argv += [word for override in args.overrides for word in ("--set", override)]
+            command = mpirun_command(ranks, argv) if ranks > 1 else argv
+            code, stdout, stderr, _ = launch.execute(command, timeout=None, cwd=ROOT, spin=True)
+            lines = [line for line in stdout.splitlines() if line.startswith("{")]
+            if code != 0 or not lines:
+                print(json.dumps({"particles": target, "ranks": ranks,
+                                  "error": stderr.strip().splitlines()[-3:]}), flush=True)
+                status = 1
+                continue
+            print(lines[-1], flush=True)
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())
