@@ -8,9 +8,6 @@ names one.
 """
 
 import importlib
-import logging
-
-log = logging.getLogger(__name__)
 
 DECOMPOSITIONS = {
     "slabs": "parmps.parallel.slabs:SlabDecomposition",
@@ -29,7 +26,9 @@ def decomposition_class(name):
 
 def create_decomposition(comm, case):
     """The case's decomposition on ``comm`` (collective); "auto" chooses with
-    :func:`choose_decomposition`. Rank 0 logs which one runs, and why."""
+    :func:`choose_decomposition`. Which one runs, and why, is logged once the scene is
+    distributed (:meth:`Decomposition.log_choice`): a case refused while its scene is
+    built gets its one line of error alone."""
     name = case["parallel"].get("decomposition", "auto")
     why = "parallel.decomposition"
     if name == "auto" and case["parallel"].get("grid"):
@@ -38,8 +37,7 @@ def create_decomposition(comm, case):
         name, reason = choose_decomposition(comm.size, case)
         why = f"auto: {reason}"
     decomposition = decomposition_class(name)(comm, case)
-    if comm.rank == 0:
-        log.info("decomposition: %s, %s (%s)", name, decomposition.describe(), why)
+    decomposition.choice = (name, why)
     return decomposition
 
 

@@ -35,12 +35,16 @@ results do not depend on the decomposition or the rank count beyond round-off.
 """
 
 import abc
+import logging
 import time
 
 import numpy as np
 
 from parmps.core.settings import search_radius
 from parmps.parallel.exchange import imbalance_of
+
+# The package's logger: rank 0's line says which decomposition runs.
+log = logging.getLogger("parmps.parallel")
 
 
 class Decomposition(abc.ABC):
@@ -115,6 +119,15 @@ class Decomposition(abc.ABC):
     @abc.abstractmethod
     def n_ghost(self):
         """Ghosts made by the last build_halo."""
+
+    # (name, why) of the choice, set by parallel.create_decomposition.
+    choice = None
+
+    def log_choice(self):
+        """Rank 0 logs which decomposition runs and why (after the scene is distributed)."""
+        if self.choice is not None and self.comm.rank == 0:
+            name, why = self.choice
+            log.info("decomposition: %s, %s (%s)", name, self.describe(), why)
 
     @abc.abstractmethod
     def describe(self):

@@ -95,6 +95,7 @@ class Simulation:
         # A continued run redistributes the checkpoint's particles over this rank count.
         self.state.particles = self.decomposition.distribute(
             global_scene if self.checkpoint is None else self.checkpoint.particles)
+        self.decomposition.log_choice()
         self.fluid = FluidSolver(case, comm, self.decomposition)
         if self.model is not None:
             from parmps.coupling import coupling_scheme
