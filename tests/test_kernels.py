@@ -207,12 +207,14 @@ def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene
 
 
 def reference_collisions(position, velocity, moving, limit, restitution, n_rows):
-    """collision_change written pair by pair in numpy."""
+    """collision_change written pair by pair in numpy (a fixed partner reaches
+    sqrt(d - 1) times as far: the widest gap of a wall layer)."""
     out = np.zeros((n_rows, position.shape[1]))
+    reach = np.where(moving, limit, limit * np.sqrt(position.shape[1] - 1))
     for i in np.flatnonzero(moving[:n_rows]):
         offset = position - position[i]
         r = np.linalg.norm(offset, axis=1)
-        close = (r < limit) & (np.arange(len(position)) != i)
+        close = (r < reach) & (np.arange(len(position)) != i)
         normal = offset[close] / r[close, None]
         approach = np.einsum("pk,pk->p", velocity[i] - velocity[close], normal)
         share = np.where(moving[close], 0.5, 1.0)
@@ -231,6 +233,28 @@ def test_collisions_match_pairwise_reference(scene):
     expected = reference_collisions(squeezed, velocity, moving, 0.5 * SPACING, 0.2, n)
     assert np.count_nonzero(np.any(expected != 0, axis=1)) > 10
     np.testing.assert_allclose(change, expected, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_particle_heading_for_the_widest_gap_of_a_wall_layer_bounces_at_its_plane(dimension):
+    """A wall layer at z = 0 (y = 0 in 2D), a square lattice of spacing l0; a fluid particle
+    heading straight down at its widest gap, a tenth of a spacing off the gap's centre along
+    each axis and 0.2 l0 above the plane: the collision model pushes it back up in any d. The
+    centre of a 3D layer's gap is 0.71 l0 from its corners, beyond the 0.5 l0 that closes a
+    2D layer's (there the particle is 0.49 l0 from its nearest wall particle, in 3D 0.67)."""
+    spacing = 1.0
+    layer = np.array(np.meshgrid(*[np.arange(-2.0, 3.0)] * (dimension - 1), indexing="ij"))
+    layer = np.column_stack([layer.reshape(dimension - 1, -1).T, np.zeros(5 ** (dimension - 1))])
+    gap = np.r_[np.full(dimension - 1, 0.45), 0.2]
+    position = np.vstack([gap, layer])
+    velocity = np.zeros_like(position)
+    velocity[0, -1] = -1.0
+    moving = np.r_[True, np.zeros(len(layer), bool)]
+    indptr, cols = pair_list(position, 1.5 * spacing, n_rows=1)
+    change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5 * spacing,
+                                      0.2, 1)
+    # The approach along the line to the nearest wall particle is reversed (restitution 0.2).
+    assert change[0, -1] > 0.05
 
 
 @pytest.mark.parametrize("dimension", [2, 3])

@@ -505,13 +505,19 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
                       n_rows, d):
     out = np.zeros((n_rows, d))
     limit2 = distance_limit * distance_limit
+    # A wall layer is a (d-1)-dimensional square lattice: the centre of its widest gap
+    # lies sqrt(d-1)/2 spacings from the particles around it (half a spacing in 2D, 0.71
+    # in 3D). A fixed partner's reach grows by sqrt(d-1) so that the gaps close at the
+    # layer's plane in any d, as a 2D wall's do at 0.5 l0: a 3D wall's gaps otherwise let
+    # fluid through at an impact.
+    fixed_limit2 = limit2 * (d - 1)
     for i in range(n_rows):
         if not moving[i]:
             continue
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             r2 = pair_distance2(position, i, j, d)
-            if r2 >= limit2 or r2 <= 0.0:
+            if r2 >= (limit2 if moving[j] else fixed_limit2) or r2 <= 0.0:
                 continue
             r = np.sqrt(r2)
             # The unit vector r_ij / r, component by component.
