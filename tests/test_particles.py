@@ -41,7 +41,7 @@ def test_empty_and_default_dimension():
     assert Particles.empty().position.shape == (0, 2)
     assert Particles.empty(dimension=3).velocity.shape == (0, 3)
     assert Particles.concatenate([], dimension=3).position.shape == (0, 3)
-    # Nothing tells d: every case is 2D for now.
+    # Nothing tells d: the default is 2.
     assert Particles({"id": np.arange(3)}).position.shape == (3, 2)
     assert Particles({"id": np.arange(3)}, dimension=3).position.shape == (3, 3)
 

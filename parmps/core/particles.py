@@ -16,7 +16,8 @@ FLUID, WALL, DUMMY, SOLID, INFLOW = 0, 1, 2, 3, 4
 KIND_NAMES = {FLUID: "fluid", WALL: "wall", DUMMY: "dummy", SOLID: "solid node",
               INFLOW: "inflow buffer"}
 
-# Every case is 2D for now: the dimension when nothing else tells it.
+# The dimension when nothing else tells it (no position given): a case's is that of its
+# domain.lower, 2 or 3.
 DEFAULT_DIMENSION = 2
 
 # name -> (dtype, trailing shape, fill value for new particles); "d" in a shape

@@ -84,10 +84,8 @@ class FluidSolver:
     ``gradient`` too, so the fluid and the bodies feel the same one.
     """
 
-    def __init__(self, case, comm, decomposition, pressure_solver=None, dimension=2):
+    def __init__(self, case, comm, decomposition, pressure_solver=None):
         self.comm = comm
-        # The number of components of positions: every case is 2D for now.
-        self.dimension = dimension
         self.decomposition = decomposition
         constants = MPSConstants.from_case(case)
         self.constants = constants
