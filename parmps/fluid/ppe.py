@@ -277,6 +277,18 @@ class PressureSolver:
             self.ksp.solve(b, x)
         self.solves += 1
         reason = self.ksp.getConvergedReason()
+        if reason < 0 and reuse:
+            # A preconditioner kept from earlier matrices can be indefinite for this one
+            # (CG then stops with DIVERGED_INDEFINITE_PC): solve again with one set up
+            # for this matrix before calling the step a failure. Every rank reuses or
+            # not alike, so every rank takes this branch together.
+            reuse = False
+            self.ksp.getPC().setReusePreconditioner(False)
+            self.ksp.setOperators(matrix)
+            x.getArray()[:] = guess
+            with self._options_inserted():
+                self.ksp.solve(b, x)
+            reason = self.ksp.getConvergedReason()
         iterations = self.ksp.getIterationNumber()
         residual = self.ksp.getResidualNorm()
         solution = x.getArray().copy()
@@ -294,7 +306,11 @@ class PressureSolver:
         del csr
         if reason < 0:
             raise RunFailure(f"pressure solve diverged at step {step}: {_reason_name(PETSc, reason)}"
-                             f" after {iterations} iterations (residual {residual:.3e})")
+                             f" after {iterations} iterations (residual {residual:.3e}), with a "
+                             f"preconditioner set up for this step's matrix; the run may have "
+                             f"gone unstable (lower time.cfl or time.dt_max), or the solver "
+                             f"needs other settings (e.g. -pressure_pc_type hypre, "
+                             f"-pressure_ksp_max_it)")
         return solution, iterations, residual
 
     def destroy(self):
