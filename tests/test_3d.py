@@ -9,13 +9,12 @@ checked by validation/dam_break_3d (its README gives the command and the figures
 
 import json
 
-import h5py
 import numpy as np
 import pytest
 from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
-from parmps import config, schema
+from parmps import config, open_result, schema
 from parmps.core import lattice, scene
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.errors import CaseError
@@ -293,11 +292,9 @@ COARSE_STEPS = ["--set", "particles.spacing=0.11", "--set", "time.fixed_dt=0.002
 
 
 def _last_frame(path):
-    with h5py.File(path, "r") as handle:
-        group = handle["frames"][sorted(handle["frames"])[-1]]
-        order = np.argsort(group["id"][()])
-        return (group["id"][()][order], group["position"][()][order],
-                group["pressure"][()][order])
+    with open_result(path) as result:
+        frame = result.frames[-1]
+        return frame.id, frame.position, frame.pressure
 
 
 @pytest.fixture(scope="module")
@@ -371,10 +368,10 @@ def test_a_3d_duct_takes_in_and_lets_out_whole_cross_sections(tmp_path):
     case.write_text(DUCT_3D)
     result = run_parmps([case, "-o", tmp_path / "out"], timeout=300)
     assert result.returncode == 0, result.stderr
-    with h5py.File(tmp_path / "out" / "result.h5", "r") as handle:
-        inflow = handle["diagnostics/inflow"][()]
-        outflow = handle["diagnostics/outflow"][()]
-        fluid = handle["diagnostics/n_fluid"][()]
+    with open_result(tmp_path / "out") as result:
+        inflow = result.diagnostics.inflow
+        outflow = result.diagnostics.outflow
+        fluid = result.diagnostics.n_fluid
     # 0.3 s at 0.1 m/s moves 1.5 spacings: a cross-section is 5 x 5 particles, and
     # whole sections enter and leave.
     assert inflow[-1] > 0 and inflow[-1] % 25 == 0
@@ -401,9 +398,8 @@ def test_every_registered_scheme_runs_the_3d_dam_break(tmp_path, key, name):
                          "--set", "time.output_interval=0.02"], timeout=300)
     assert result.returncode == 0, result.stderr
     ids, position, pressure = _last_frame(tmp_path / "result.h5")
-    with h5py.File(tmp_path / "result.h5", "r") as handle:
-        first = handle["frames"][sorted(handle["frames"])[0]]
-        assert len(first["id"]) == len(ids)
+    with open_result(tmp_path) as result:
+        assert len(result.frames[0]) == len(ids)
     assert np.isfinite(position).all() and np.isfinite(pressure).all()
     # The water column 0.55 m deep: its floor reads about rho g H.
     assert 0.5 * 1000 * 9.81 * 0.55 < pressure.max() < 3 * 1000 * 9.81 * 0.55

@@ -39,9 +39,10 @@ import logging
 import time
 
 import numpy as np
+from mpi4py import MPI
 
 from parmps.core.settings import search_radius
-from parmps.parallel.exchange import imbalance_of
+from parmps.parallel.exchange import imbalance_of, sorted_by_id
 
 # The package's logger: rank 0's line says which decomposition runs.
 log = logging.getLogger("parmps.parallel")
@@ -151,6 +152,21 @@ class Decomposition(abc.ABC):
     def imbalance(self, particles):
         """Largest rank's owned count over the mean (1.0 is perfect balance)."""
         return imbalance_of(self.counts(particles))
+
+    def _keep_owned(self, particles, owner_rank):
+        """The scene's particles whose ``owner_rank`` is this rank, in ascending id, with the
+        halo cleared and the load's drift reference reset; collective. Returns them, the total
+        over the ranks and the imbalance. A total that is not the scene's means the ranks built
+        different scenes, which is a bug, not a case error."""
+        mine = sorted_by_id(particles.select(np.flatnonzero(owner_rank == self.rank)))
+        total = self.comm.allreduce(mine.n_owned, op=MPI.SUM)
+        if total != particles.n_owned:
+            raise RuntimeError(f"distribute: ranks hold {total} particles of "
+                               f"{particles.n_owned} (the scenes differ between ranks?)")
+        imbalance = self.imbalance(mine)
+        self._reference = (0, imbalance)
+        self._clear_halo(mine.n_owned)
+        return mine, total, imbalance
 
     def _positions(self, position):
         position = np.asarray(position, dtype=np.float64)

@@ -206,18 +206,10 @@ class BlockDecomposition(Decomposition):
                 f"ranks")
         self.cuts = cuts
         self._set_boxes()
-        keep = np.flatnonzero(self._owner(position, cuts) == self.rank)
-        mine = sorted_by_id(particles.select(keep))
-        total = self.comm.allreduce(mine.n_owned, op=MPI.SUM)
-        if total != particles.n_owned:
-            raise RuntimeError(f"distribute: ranks hold {total} particles of "
-                               f"{particles.n_owned} (the scenes differ between ranks?)")
-        imbalance = self.imbalance(mine)
-        self._reference = (0, imbalance)
+        mine, total, imbalance = self._keep_owned(particles, self._owner(position, cuts))
         log.info("distributed %d particles over %s blocks, %d neighbours on rank %d, "
                  "imbalance %.3f", total, describe_grid(self.grid), len(self._neighbours),
                  self.rank, imbalance)
-        self._clear_halo(mine.n_owned)
         return mine
 
     def _exact_cuts(self, position, grid):

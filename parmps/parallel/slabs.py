@@ -164,17 +164,9 @@ class SlabDecomposition(Decomposition):
                 f"{rank}'s is {width:g} m wide, thinner than the halo {self.min_slab_width:g} m "
                 f"({_WIDTH_RULE}): run on fewer ranks")
         self.edges = edges
-        keep = np.flatnonzero(self._owner_x(x) == self.rank)
-        mine = sorted_by_id(particles.select(keep))
-        total = self.cart.allreduce(mine.n_owned, op=MPI.SUM)
-        if total != particles.n_owned:
-            raise RuntimeError(f"distribute: ranks hold {total} particles of "
-                               f"{particles.n_owned} (the scenes differ between ranks?)")
-        imbalance = self.imbalance(mine)
-        self._reference = (0, imbalance)
+        mine, total, imbalance = self._keep_owned(particles, self._owner_x(x))
         log.info("distributed %d particles over %d slabs, edges %s, imbalance %.3f",
                  total, self.size, np.array2string(self.interior_edges, precision=4), imbalance)
-        self._clear_halo(mine.n_owned)
         return mine
 
     def _quantile_edges(self, xs):

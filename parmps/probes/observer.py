@@ -90,13 +90,13 @@ class Probe:
         with corners ``a`` and ``b``, shifted half a spacing along ``normal`` onto the
         centre line (plane) of the first fluid layer."""
         shift = 0.5 * spacing * normal
-        spans = [axis for axis in range(len(a)) if b[axis] != a[axis]]
         if self.dimension == 2:
             length = float(np.linalg.norm(b - a))
             directions = [((b - a) / length, length)]
         else:
             directions = [(np.eye(len(a))[axis] * np.sign(b[axis] - a[axis]),
-                           abs(b[axis] - a[axis])) for axis in spans]
+                           abs(b[axis] - a[axis]))
+                          for axis in range(len(a)) if b[axis] != a[axis]]
         grid = []
         for direction, length in directions:
             # A length of a whole number of half spacings is that many samples, whatever
