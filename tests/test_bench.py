@@ -35,3 +35,50 @@ def test_time_to_solution_reports_a_failed_run():
     assert result.returncode == 1
     (line,) = [json.loads(text) for text in result.stdout.splitlines() if text.startswith("{")]
     assert "time.cfl" in " ".join(line["error"])
+
+
+def test_scaling_counts_the_messages_of_a_step(tmp_path):
+    """--scaling on 1 and 2 ranks of a small dam break: no traffic on one rank; on two,
+    every step sends halo and solve messages both ways, and the ghosts are a small share."""
+    result = run_parmps(["bench", "--scaling", "--particles", "2500", "--ranks", "1", "2",
+                         "--steps", "2", "--warmup", "2"], timeout=300)
+    assert result.returncode == 0, result.stderr
+    one, two = [json.loads(text) for text in result.stdout.splitlines() if text.startswith("{")]
+    assert one["ranks"] == 1 and one["p2p_messages"] == 0 and one["ghosts_per_owned"] == 0
+    assert two["ranks"] == 2 and two["neighbours"] == 1
+    # At least a halo build and four refreshes a step, each a message per direction.
+    assert two["p2p_messages"] >= 5 and two["p2p_bytes"] > 0
+    # Both ranks send the same kinds of message: the mean is within the largest.
+    assert 0 < two["p2p_bytes_mean"] <= two["p2p_bytes"]
+    assert 0 < two["ghosts_per_owned"] < 0.5
+    assert two["ksp_iterations_per_step"] > 0
+
+
+def test_monitoring_files_are_read_per_rank(tmp_path):
+    from parmps.validation import scaling
+    (tmp_path / "t.0.prof").write_text(
+        "# POINT TO POINT\nE\t0\t1\t8000 bytes\t3 msgs sent\t0,0\n"
+        "E\t0\t2\t100 bytes\t1 msgs sent\t0,0\nI\t0\t1\t21 bytes\t5 msgs sent\n"
+        "# COLLECTIVES\nC\t0\t1\t21 bytes\t5 msgs sent\n")
+    (tmp_path / "t.1.prof").write_text("# POINT TO POINT\nE\t1\t0\t40 bytes\t2 msgs sent\t0\n")
+    counts = scaling.read_monitoring(str(tmp_path / "t"))
+    assert counts == {0: (4, 8100, 5), 1: (2, 40, 0)}
+    # Two runs 4 steps apart: the difference per step.
+    step = scaling.traffic_per_step({0: (2, 100, 1), 1: (0, 0, 0)}, counts, 4)
+    assert step["p2p_messages"] == 0.5 and step["p2p_bytes"] == 2000
+    assert step["p2p_bytes_mean"] == round((2000 + 10) / 2)
+    assert step["collective_messages"] == 1.0
+
+
+def test_the_projection_is_perfect_on_one_rank_and_falls_with_the_halo():
+    from parmps.validation import scaling
+    terms = dict(cost=1e-5, ghost_cost=3e-6, halo_width=4.2, messages=20, message_bytes=150,
+                 reductions=60)
+    efficiency, ghosts, shares = scaling.projection(particles=1e6, ranks=1, **terms)
+    assert efficiency == 1.0 and ghosts == 0.0
+    # 1,000 particles a rank: a 10-spacing cube with a 4.2-spacing halo holds 5.2 ghosts
+    # per owned particle, (18.4^3 - 10^3)/10^3.
+    efficiency, ghosts, shares = scaling.projection(particles=1e7, ranks=1e4, **terms)
+    assert ghosts == pytest.approx((18.4 ** 3 - 1000) / 1000)
+    assert efficiency < 0.5 and max(shares, key=shares.get) == "ghosts"
+    assert sum(shares.values()) == pytest.approx(1.0)

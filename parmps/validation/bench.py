@@ -156,14 +156,21 @@ def worker(args):
     timers = run.fluid.timers
     decomposition = run.decomposition
     marks = {}
+    # Over the timed steps: this rank's ghost-to-owned ratios, and the solve's iterations.
+    tally = {"ghost_ratio": 0.0, "iterations": 0, "neighbours": 0}
 
     def mark_warm(state):
+        if state.step > args.warmup:
+            tally["ghost_ratio"] += decomposition.n_ghost / max(state.particles.n_owned, 1)
+            tally["iterations"] += int(state.diagnostics.get("ksp_iterations", 0))
+            tally["neighbours"] = max(tally["neighbours"], len(decomposition.neighbours))
         if state.step == args.warmup:
             comm.Barrier()
             marks["start"] = time.perf_counter()
             marks["fluid"] = dict(timers.seconds)
             marks["halo"] = decomposition.halo_seconds
             marks["migration"] = decomposition.migration_seconds
+            marks["setups"] = run.pressure_solver.setups
 
     run.execute(extra_observers=[Callback(mark_warm)])
     comm.Barrier()
@@ -174,6 +181,8 @@ def worker(args):
     breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
     breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
     particles = comm.allreduce(run.state.particles.n_owned)
+    ghosts_per_owned = comm.allreduce(tally["ghost_ratio"] / args.steps, op=MPI.MAX)
+    neighbours = comm.allreduce(tally["neighbours"], op=MPI.MAX)
     # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
     memory = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1024.0
     if comm.rank == 0:
@@ -185,6 +194,11 @@ def worker(args):
             "max_rss_mb": round(memory, 1),
             "bytes_per_particle": round(memory * 2 ** 20 / particles),
             "spacing": spacing,
+            "decomposition": decomposition.name,
+            "ghosts_per_owned": round(ghosts_per_owned, 4),
+            "neighbours": neighbours,
+            "ksp_iterations_per_step": round(tally["iterations"] / args.steps, 2),
+            "amg_setups": run.pressure_solver.setups - marks["setups"],
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
         if args.overrides:
@@ -289,6 +303,10 @@ def build_parser():
                         help="with --time-to-solution: simulated seconds (default 0.5)")
     parser.add_argument("--scene", choices=tuple(SCENES), default="dam_break",
                         help="dam_break (2D, the default) or dam_break_3d (SPHERIC Test 2)")
+    parser.add_argument("--scaling", action="store_true",
+                        help="the scaling record: per rank count (default 1 2 3 4 6 8) the "
+                             "messages and bytes per step and rank, ghosts per owned particle, "
+                             "CG iterations (parmps.validation.scaling); needs Open MPI")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     return parser
 
@@ -308,6 +326,13 @@ def main(argv=None):
                                         args.scene)
                 status = status or int("error" in line)
                 print(json.dumps(line), flush=True)
+        return status
+    if args.scaling:
+        from parmps.validation import scaling
+        status = 0
+        for target in args.particles:
+            spacing, _ = spacing_for(target, args.scene)
+            status = status or scaling.record(args, spacing)
         return status
     return sizes(args)
 
