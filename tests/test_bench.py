@@ -52,6 +52,10 @@ def test_scaling_counts_the_messages_of_a_step(tmp_path):
     assert 0 < two["p2p_bytes_mean"] <= two["p2p_bytes"]
     assert 0 < two["ghosts_per_owned"] < 0.5
     assert two["ksp_iterations_per_step"] > 0
+    # Every CG iteration multiplies by the matrix at least once: a message each.
+    assert two["solve_messages"] >= two["ksp_iterations_per_step"]
+    assert two["solve_reductions"] >= two["ksp_iterations_per_step"]
+    assert one["solve_messages"] == 0
 
 
 def test_monitoring_files_are_read_per_rank(tmp_path):

@@ -139,6 +139,35 @@ def _case(spacing, steps=0, overrides=(), scene_name="dam_break"):
     return schema.validate(raw)
 
 
+class _SolveTraffic:
+    """What PETSc's own log counts of the pressure solve (its set-ups included): messages
+    and bytes a rank sends, and its reductions. Open MPI's monitoring does not see PETSc's
+    neighbour exchanges (persistent requests), so the scaling record takes them from here.
+    PETSc counts a message when it is sent and again when it is received; half its count
+    is what a rank sends (the exchanges are symmetric)."""
+
+    EVENT = "KSPSolve"
+
+    def __init__(self):
+        from petsc4py import PETSc
+        PETSc.Log.begin()
+        self.event = PETSc.Log.Event(self.EVENT)
+        self.start = self._now()
+
+    def _now(self):
+        info = self.event.getPerfInfo()
+        return {"solve_messages": 0.5 * info["numMessages"],
+                "solve_bytes": 0.5 * info["messageLength"],
+                "solve_reductions": float(info["numReductions"])}
+
+    def mark(self):
+        self.start = self._now()
+
+    def since_mark(self):
+        now = self._now()
+        return {name: now[name] - self.start[name] for name in now}
+
+
 def worker(args):
     """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
     import time
@@ -148,6 +177,7 @@ def worker(args):
     from parmps.run.observers import Callback
     from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
+    solve_traffic = _SolveTraffic()
     spacing = args.spacing[0]
     case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides,
                  scene_name=args.scene)
@@ -171,6 +201,7 @@ def worker(args):
             marks["halo"] = decomposition.halo_seconds
             marks["migration"] = decomposition.migration_seconds
             marks["setups"] = run.pressure_solver.setups
+            solve_traffic.mark()
 
     run.execute(extra_observers=[Callback(mark_warm)])
     comm.Barrier()
@@ -181,6 +212,8 @@ def worker(args):
     breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
     breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
     particles = comm.allreduce(run.state.particles.n_owned)
+    solve = {name: comm.allreduce(value / args.steps, op=MPI.MAX)
+             for name, value in solve_traffic.since_mark().items()}
     ghosts_per_owned = comm.allreduce(tally["ghost_ratio"] / args.steps, op=MPI.MAX)
     neighbours = comm.allreduce(tally["neighbours"], op=MPI.MAX)
     # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
@@ -199,6 +232,7 @@ def worker(args):
             "neighbours": neighbours,
             "ksp_iterations_per_step": round(tally["iterations"] / args.steps, 2),
             "amg_setups": run.pressure_solver.setups - marks["setups"],
+            **{name: round(value, 1) for name, value in solve.items()},
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
         if args.overrides:

@@ -12,10 +12,14 @@ of the two runs is what S steps cost, free of the set-up, so the line gives per 
 and rank:
 
 - ``p2p_messages`` and ``p2p_bytes``: point-to-point messages and bytes a rank sends
-  (halo builds, ghost refreshes, migrations, PETSc's neighbour exchanges), the largest
+  through MPI's ordinary calls (halo builds, ghost refreshes, migrations), the largest
   rank's and the mean (``_mean``);
 - ``collective_messages``: the point-to-point messages the collectives themselves send
   (allreduces of CG and of the driver), the largest rank's;
+- ``solve_messages``, ``solve_bytes``, ``solve_reductions``: what the pressure solve
+  (``KSPSolve``, its preconditioner set-ups included) sends and how many reductions it
+  makes, from PETSc's own log (the monitoring does not see PETSc's persistent-request
+  exchanges), the largest rank's;
 
 and, from the worker's timed steps: ``ghosts_per_owned`` (the largest rank's mean
 ghost-to-owned ratio), ``neighbours`` (the most ranks one rank exchanges with),
