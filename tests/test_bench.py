@@ -86,3 +86,21 @@ def test_the_projection_is_perfect_on_one_rank_and_falls_with_the_halo():
     assert ghosts == pytest.approx((18.4 ** 3 - 1000) / 1000)
     assert efficiency < 0.5 and max(shares, key=shares.get) == "ghosts"
     assert sum(shares.values()) == pytest.approx(1.0)
+
+
+def test_the_model_terms_come_from_the_record():
+    from parmps.validation import scaling
+    lines = [
+        {"ranks": 1, "particles": 1000, "us_per_particle_step": 10.0},
+        {"ranks": 2, "particles": 1000, "neighbours": 1, "ghosts_per_owned": 0.1,
+         "p2p_messages": 20, "solve_messages": 80, "p2p_bytes": 3000, "solve_bytes": 7000,
+         "collective_messages": 50},
+        {"ranks": 4, "particles": 1000, "neighbours": 2, "ghosts_per_owned": 0.2,
+         "p2p_messages": 40, "solve_messages": 160, "p2p_bytes": 1500, "solve_bytes": 3500,
+         "collective_messages": 100},
+    ]
+    terms = scaling.terms_from_record(lines)
+    # 100 messages per neighbour; 10,000 bytes for 50 ghosts, 5,000 for 50; an allreduce
+    # is log2 P messages a rank.
+    assert terms == {"cost": pytest.approx(1e-5), "messages": 100.0,
+                     "message_bytes": 150.0, "reductions": 50.0}

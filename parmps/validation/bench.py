@@ -341,6 +341,13 @@ def build_parser():
                         help="the scaling record: per rank count (default 1 2 3 4 6 8) the "
                              "messages and bytes per step and rank, ghosts per owned particle, "
                              "CG iterations (parmps.validation.scaling); needs Open MPI")
+    parser.add_argument("--project", metavar="RECORD",
+                        help="the projected parallel efficiency at 100-10,000 ranks for 10 M "
+                             "and 100 M particles from a --scaling record of the 3D scene "
+                             "(a file of its JSON lines)")
+    parser.add_argument("--cost", type=float,
+                        help="with --project: seconds per particle-step on one rank, instead "
+                             "of the record's 1-rank line")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     return parser
 
@@ -361,6 +368,8 @@ def main(argv=None):
                 status = status or int("error" in line)
                 print(json.dumps(line), flush=True)
         return status
+    if args.project:
+        return _project(args.project, args.cost)
     if args.scaling:
         from parmps.validation import scaling
         status = 0
@@ -369,6 +378,27 @@ def main(argv=None):
             status = status or scaling.record(args, spacing)
         return status
     return sizes(args)
+
+
+def _project(path, cost=None):
+    """Print the model's terms and its projection lines from the record at ``path``."""
+    from parmps.core.settings import search_radius
+    from parmps.validation import scaling
+    try:
+        with open(path) as handle:
+            lines = [json.loads(text) for text in handle if text.startswith("{")]
+        lines = [line for line in lines if "error" not in line]
+        case = _case(None, scene_name="dam_break_3d")
+        # The halo in spacings: the search reach and both migration margins.
+        halo = (search_radius(case) / case["particles"]["spacing"]
+                + case["parallel"]["migration_margin"])
+        terms, projected = scaling.project(lines, halo, cost=cost)
+    except (OSError, ValueError, KeyError) as exc:
+        raise CaseError(f"bench --project {path}: {exc}") from None
+    print(json.dumps(dict(terms, halo_spacings=round(halo, 3))), flush=True)
+    for line in projected:
+        print(json.dumps(line), flush=True)
+    return 0
 
 
 def sizes(args):

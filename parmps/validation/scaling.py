@@ -123,6 +123,56 @@ def record(args, spacing):
     return status
 
 
+def terms_from_record(lines):
+    """The model's measured terms from a ``--scaling`` record of one scene: the cost per
+    particle-step on one rank, and from the multi-rank lines the messages per neighbour and
+    step (the program's and the solve's), the bytes per ghost and step and the reductions
+    per step (each rank count's own, their median over the rank counts)."""
+    import statistics
+    one = [line for line in lines if line["ranks"] == 1]
+    many = [line for line in lines if line["ranks"] > 1 and line.get("neighbours")]
+    if not one or not many:
+        raise ValueError("the record needs a 1-rank line and a line with neighbours")
+    ghosts = [line["ghosts_per_owned"] * line["particles"] / line["ranks"] for line in many]
+    return {
+        "cost": 1e-6 * one[0]["us_per_particle_step"],
+        "messages": statistics.median(
+            (line["p2p_messages"] + line["solve_messages"]) / line["neighbours"]
+            for line in many),
+        "message_bytes": statistics.median(
+            (line["p2p_bytes"] + line["solve_bytes"]) / g for line, g in zip(many, ghosts)),
+        # An allreduce over P ranks sends log2 P messages from each rank (recursive
+        # doubling); the collectives' own messages count PETSc's reductions too.
+        "reductions": statistics.median(
+            line["collective_messages"] / max(math.log2(line["ranks"]), 1.0)
+            for line in many),
+    }
+
+
+def project(lines, halo_width, particles=(1e7, 1e8), ranks=(100, 1000, 10000),
+            ghost_shares=(0.25, 1.0), cost=None):
+    """Projection lines (dicts) for ``particles`` x ``ranks``, a ghost costing each of
+    ``ghost_shares`` of an owned particle-step; ``cost`` [s per particle-step] replaces the
+    record's 1-rank figure (a record taken on a busy machine overstates it)."""
+    terms = terms_from_record(lines)
+    if cost is not None:
+        terms["cost"] = cost
+    out = []
+    for n in particles:
+        for p in ranks:
+            line = {"particles": n, "ranks": p, "owned_per_rank": round(n / p)}
+            for share in ghost_shares:
+                efficiency, ghosts, shares = projection(
+                    terms["cost"], share * terms["cost"], halo_width, terms["messages"],
+                    terms["message_bytes"], terms["reductions"], n, p)
+                line["ghosts_per_owned"] = round(ghosts, 3)
+                line[f"efficiency_ghost_{share:g}"] = round(efficiency, 3)
+                line[f"largest_loss_ghost_{share:g}"] = max(
+                    (name for name in shares if name != "compute"), key=shares.get)
+            out.append(line)
+    return terms, out
+
+
 def projection(cost, ghost_cost, halo_width, messages, message_bytes, reductions,
                particles, ranks, dimension=3, latency=2e-6, bandwidth=5e9,
                reduction_latency=3e-6):
