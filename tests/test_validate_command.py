@@ -91,3 +91,26 @@ def test_a_judge_table_reaches_into_a_nested_metric():
     assert len(verdicts) == 16
     assert verdicts["P1.arrival_error"]["pass"] and verdicts["P2.means.0.error"]["pass"]
     assert not verdicts["P3.means.1.error"]["pass"] and not verdicts["P8.means.0.error"]["pass"]
+
+
+def test_cases_runs_each_case_to_its_end_on_each_rank_count(tmp_path):
+    """--cases, the one command of every case to its end: here the 7x7 pair to 0.05 s on 1
+    and 2 ranks (the full runs are in the closing notes: `validate --cases --all`)."""
+    result = run_parmps(["validate", "--cases", "--case-glob", "mass_spring_7x7*",
+                         "--case-ranks", "1", "2", "--end-time", "0.05", "-o", tmp_path],
+                        timeout=300)
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(text) for text in result.stdout.splitlines() if text.startswith("{")]
+    assert [(line["case"], line["ranks"]) for line in lines] == [
+        ("cases/mass_spring_7x7.toml", 1), ("cases/mass_spring_7x7.toml", 2),
+        ("cases/mass_spring_7x7_free.toml", 1), ("cases/mass_spring_7x7_free.toml", 2)]
+    for line in lines:
+        assert line["passed"] and line["outcome"] == "ran to the end"
+        assert line["end_time"] == 0.05 and line["reached"] == pytest.approx(0.05)
+        assert line["steps"] == 50
+
+
+def test_cases_refuses_a_pattern_matching_nothing(tmp_path):
+    result = run_parmps(["validate", "--cases", "--case-glob", "nothing_like_this"], timeout=60)
+    assert result.returncode == 2
+    assert error_lines(result.stderr) == ["parmps: error: validate: no case matches cases/nothing_like_this.toml"]

@@ -4,6 +4,7 @@
     python -m parmps validate NAME [NAME ...] | --all  [-n RANKS] [-o OUTDIR]
         [--end-time T] [--set SECTION.KEY=VALUE ...] [--timeout S]
     python -m parmps validate NAME --result RESULT.h5     # measure a run made before
+    python -m parmps validate --cases [--case-ranks 1 2] [--all]   # every case to its end
 
 Each validation runs its case as ``validation/<name>/validation.toml`` says (its end time,
 output interval and settings, :meth:`parmps.validation.Validation.run_arguments`), through
@@ -11,6 +12,11 @@ the one launcher (:mod:`parmps.validation.launch`), measures the result with its
 prints one JSON line: the command, the outcome, the metric's figures and each tolerance's
 verdict. Exit status 0 when every verdict passes, 1 when one fails or a run fails, 2 for
 bad input (one line on stderr).
+
+``--cases`` runs every case in ``cases/`` to its own end time on each of ``--case-ranks``
+(1 and 2 by default) and prints one line per run: the case, the ranks, the outcome, the
+simulated time reached, the steps and the seconds. With ``--all`` as well, every validation
+follows: the one command that shows the defaults carry every scene to its end.
 """
 
 import argparse
@@ -44,6 +50,13 @@ def build_parser():
                         help="a case override for every run (repeatable)")
     parser.add_argument("--result", metavar="RESULT",
                         help="measure this result (file or output directory) instead of running")
+    parser.add_argument("--cases", action="store_true",
+                        help="run every case in cases/ to its end time on each of "
+                             "--case-ranks, one line per run")
+    parser.add_argument("--case-ranks", type=int, nargs="+", default=[1, 2], metavar="RANKS",
+                        help="with --cases: the rank counts (default 1 2)")
+    parser.add_argument("--case-glob", default="*", metavar="PATTERN",
+                        help="with --cases: only the case files matching cases/PATTERN.toml")
     parser.add_argument("--timeout", type=float, default=24 * 3600.0,
                         help="seconds before a run is killed (default one day)")
     return parser
@@ -129,6 +142,33 @@ def validate_one(check, args):
     return record
 
 
+def run_cases(args):
+    """Every case file in cases/ to its end on each rank count; yields one record a run."""
+    import glob
+
+    from parmps import config, schema
+    from parmps.validation import ROOT, launch
+    paths = sorted(glob.glob(os.path.join(ROOT, "cases", args.case_glob + ".toml")))
+    if not paths:
+        raise CaseError(f"validate: no case matches cases/{args.case_glob}.toml")
+    for path in paths:
+        name = os.path.splitext(os.path.basename(path))[0]
+        with open(path, "rb") as handle:
+            end = schema.validate(config.load_text(handle.read().decode(), path))["time"]["end"]
+        if args.end_time is not None:
+            end = min(end, args.end_time)
+        for ranks in args.case_ranks:
+            out = os.path.abspath(os.path.join(args.output, "cases", f"{name}-{ranks}"))
+            run = launch.run(path, out, args.set, end_time=end, ranks=ranks,
+                             timeout=args.timeout, root=ROOT)
+            reached = run.get("end", 0.0)
+            yield {"case": os.path.relpath(path, ROOT), "ranks": ranks,
+                   "outcome": run["outcome"], "end_time": end, "reached": reached,
+                   "steps": run.get("steps", 0), "elapsed": round(run["elapsed"], 1),
+                   "passed": run["outcome"] == "ran to the end" and reached >= end * (1 - 1e-9),
+                   "command": run["command"]}
+
+
 def main(argv):
     """The ``validate`` command; returns the exit status."""
     from parmps import validation
@@ -136,6 +176,15 @@ def main(argv):
     if args.list:
         print("\n".join(listing()))
         return 0
+    if args.case_ranks and min(args.case_ranks) < 1:
+        raise CaseError(f"validate: --case-ranks must be at least 1, got {min(args.case_ranks)}")
+    status = 0
+    if args.cases:
+        for record in run_cases(args):
+            print(json.dumps(record), flush=True)
+            status = status or int(not record["passed"])
+        if not args.all and not args.names:
+            return status
     if args.all == bool(args.names):
         raise CaseError("validate: name one or more validations, or --all (--list names them)")
     if args.result is not None and (args.all or len(args.names) != 1):
@@ -147,7 +196,6 @@ def main(argv):
     if unknown:
         raise CaseError(f"validate: no validation '{unknown[0]}' (known: {', '.join(known)})")
     checks = [validation.load(name) for name in (known if args.all else args.names)]
-    status = 0
     for check in checks:
         record = validate_one(check, args)
         print(json.dumps(record), flush=True)
