@@ -9,6 +9,7 @@ import pytest
 
 from parmps import config, schema, validation
 from parmps.solids.mass_spring.build import build_bodies, lattice_geometry
+from parmps.solids.mass_spring.lattice import AXIAL, FACE_DIAGONAL
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, area_gradient, polygon_area
 from parmps.solids.mass_spring.model import MassSpringModel
@@ -23,7 +24,7 @@ def load_case(path):
 
 def lattice_body(stiffness=1.0e3, mass=0.01, damping=0.0, constraint=True, n=7, seed=None,
                  speed=0.0):
-    position, springs, _, boundary = lattice_geometry(n, n, 0.01, (0.0, 0.0))
+    position, springs, _, boundary = lattice_geometry((n, n), 0.01, (0.0, 0.0))
     velocity = np.zeros_like(position)
     if seed is not None:
         velocity = speed * np.random.default_rng(seed).standard_normal(position.shape)
@@ -61,12 +62,12 @@ def test_area_and_gradient_of_a_square():
 
 
 def test_lattice_boundary_is_counter_clockwise_and_complete():
-    position, springs, shear, boundary = lattice_geometry(4, 3, 0.5, (1.0, 2.0))
+    position, springs, kind, boundary = lattice_geometry((4, 3), 0.5, (1.0, 2.0))
     assert len(boundary) == 2 * (4 + 3) - 4
     assert len(set(boundary.tolist())) == len(boundary)
     assert polygon_area(position, boundary) == pytest.approx(1.5 * 1.0)
     # Structural: 3*3 + 4*2 = 17; shear: 2 per cell, 3*2 cells.
-    assert (~shear).sum() == 17 and shear.sum() == 12
+    assert (kind == AXIAL).sum() == 17 and (kind == FACE_DIAGONAL).sum() == 12
     assert len({tuple(sorted(s)) for s in springs.tolist()}) == len(springs)
 
 

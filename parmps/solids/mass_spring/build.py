@@ -26,6 +26,7 @@ from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
+from parmps.solids.mass_spring.lattice import FACE_DIAGONAL, lattice_geometry  # noqa: F401
 
 log = logging.getLogger(__name__)
 
@@ -35,26 +36,6 @@ GENERAL_ONLY = ("nodes", "springs", "boundary", "masses", "spring_stiffness")
 
 def _label(k, spec):
     return f"body[{k}]" + (f" '{spec['name']}'" if spec["name"] else "")
-
-
-def lattice_geometry(nx, ny, spacing, lower):
-    """Positions, springs (index pairs), which springs are shear, and the CCW boundary loop."""
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
-    i, j = i.ravel(), j.ravel()
-    position = np.column_stack([lower[0] + i * spacing, lower[1] + j * spacing])
-    index = np.arange(nx * ny).reshape(ny, nx)
-    horizontal = np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])
-    vertical = np.column_stack([index[:-1, :].ravel(), index[1:, :].ravel()])
-    diagonal = np.column_stack([index[:-1, :-1].ravel(), index[1:, 1:].ravel()])
-    anti_diagonal = np.column_stack([index[:-1, 1:].ravel(), index[1:, :-1].ravel()])
-    springs = np.concatenate([horizontal, vertical, diagonal, anti_diagonal])
-    shear = np.zeros(len(springs), bool)
-    shear[len(horizontal) + len(vertical):] = True
-    # Counter-clockwise: bottom row left to right, right column up, top row
-    # right to left, left column down; each corner once.
-    boundary = np.concatenate([index[0, :], index[1:, -1], index[-1, -2::-1],
-                               index[-2:0:-1, 0]])
-    return position, springs, shear, boundary
 
 
 def _segments_cross(a, b, c, d, scale):
@@ -180,7 +161,8 @@ def _lattice(label, spec):
             raise CaseError(f"{label}.{key} must be >= 2 for a lattice body, got {value}")
     if not spacing > 0:
         raise CaseError(f"{label}.spacing must be > 0 for a lattice body, got {spacing}")
-    position, springs, shear, boundary = lattice_geometry(nx, ny, spacing, spec["lower"])
+    position, springs, kind, boundary = lattice_geometry((nx, ny), spacing, spec["lower"])
+    shear = kind == FACE_DIAGONAL
     if is_elastic(spec):
         # Springs, masses and dashpots come from the material, in build_body.
         return position, springs, None, None, boundary, (nx, ny)
