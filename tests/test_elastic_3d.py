@@ -13,13 +13,14 @@ import math
 import numpy as np
 import pytest
 
-from parmps import config, schema
+from conftest import run_parmps
+from parmps import config, schema, validation
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.mass_spring.elastic import elastic_lattice
 from parmps.solids.mass_spring.lattice import lattice_geometry
 from parmps.solids.mass_spring.statics import static_displacement, stiffness_matrix
-from parmps.tools import elastic_3d
+from parmps.tools import analysis, elastic_3d
 
 SHAPE, SPACING = (6, 5, 7), 0.1
 YOUNGS, NU = 2.0e6, 0.25
@@ -266,7 +267,35 @@ def test_cantilever_settles_under_refinement(cantilever):
         assert abs(cantilever[6][quantity] - cantilever[4][quantity]) < 0.002, cantilever
 
 
+def test_shipped_case_is_the_4_node_beam():
+    """cases/elastic_cantilever_3d.toml bends statically as the 4-node beam here."""
+    check = validation.load("cantilever_3d")
+    (body,) = build_bodies(check.case())
+    matrix = stiffness_matrix(body.position, body.springs, body.stiffness)
+    displacement, _ = static_displacement(matrix, body.external_force(1.0), body.pinned)
+    tip = elastic_3d.tip_nodes(body)
+    expected = elastic_3d.static_tip_deflection(4, SLENDERNESS, tip_load=elastic_3d.TIP_LOAD)
+    assert -displacement[tip, 2].mean() == pytest.approx(expected, rel=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(900)
+def test_dynamic_run_swings_with_the_first_period(tmp_path):
+    """The time integrator on cases/elastic_cantilever_3d.toml: three periods of the tip
+    swing; measured +0.10 % (the eigen solve: -0.02 % in omega_1)."""
+    check = validation.load("cantilever_3d")
+    result = run_parmps([check.case_path, "-o", tmp_path, "--end-time",
+                         str(check.run["end_time"])], timeout=850)
+    assert result.returncode == 0, result.stderr
+    measured = check.measure(tmp_path / "result.h5")
+    assert abs(measured["error"]) < check.tolerance["period"], measured["period"]
+
+
 def test_clamped_plate_within_5_percent_of_kirchhoff():
-    """a/t = 30, 4 nodes through the thickness (the validation's a/t = 40 takes longer)."""
-    result = elastic_3d.clamped_plate(90, 4)
-    assert abs(result["error"]) < 0.05, result
+    """validation/kirchhoff_plate: a/t = 40, 4 nodes through the thickness (measured +1.8 %:
+    the Mindlin shear deformation Kirchhoff leaves out, about +1 % at a/t = 40, and the
+    lattice's twisting stiffness, +0.7 %)."""
+    check = validation.load("kirchhoff_plate")
+    measured = analysis.kirchhoff_plate(None, check.case(), **check.metric_arguments)
+    assert measured["side"] / measured["thickness"] == pytest.approx(40)
+    assert abs(measured["error"]) < check.tolerance["deflection"], measured

@@ -154,23 +154,30 @@ def quadrant(shape, springs, stiffness):
 
 def clamped_plate(cells, thickness_nodes, pressure=1000.0):
     """Centre deflection [m] of the clamped square lattice plate, ``cells`` spacings wide
-    (even), ``thickness_nodes`` nodes through the thickness, and Kirchhoff's.
-
-    Returns a dict: ``deflection`` (mean over the centre's nodes through the thickness),
-    ``expected`` = 0.00126 q a^4 / D, ``error``, ``side``, ``thickness``, ``nodes`` (of the
-    quadrant solved).
-    """
+    (even), ``thickness_nodes`` nodes through the thickness DEPTH, and Kirchhoff's: a dict,
+    see :func:`clamped_plate_deflection`."""
     spacing = DEPTH / (thickness_nodes - 1)
-    shape = (cells + 1, cells + 1, thickness_nodes)
+    return clamped_plate_deflection((cells + 1, cells + 1, thickness_nodes), spacing,
+                                    plate_spec(spacing), pressure)
+
+
+def clamped_plate_deflection(shape, spacing, spec, pressure):
+    """The lattice plate ``shape`` = (n, n, nt) (n odd) of material ``spec`` (a validated
+    [[body]] table), clamped on its four side faces, under ``pressure`` q on its top face.
+
+    Returns a dict: ``deflection`` (mean over the centre's nodes through the thickness,
+    downward), ``expected`` = 0.00126 q a^4 / D with D = E t^3/12(1 - nu^2), nu = 1/4,
+    ``error``, ``side`` a, ``thickness`` t, ``nodes`` (of the quadrant solved).
+    """
     geometry = lattice_geometry(shape, spacing, (0.0, 0.0, 0.0))
-    material = elastic_lattice("plate", plate_spec(spacing), shape, geometry.springs)
+    material = elastic_lattice("plate", spec, shape, geometry.springs)
     nodes, springs, stiffness = quadrant(shape, geometry.springs, material.stiffness)
     position = geometry.position[nodes]
     index = np.rint(position / spacing).astype(int)
-    centre = cells // 2
+    centre = (shape[0] - 1) // 2
     on_plane = [(index[:, axis] == centre).astype(float) for axis in (0, 1)]
     force = np.zeros_like(position)
-    top = index[:, 2] == thickness_nodes - 1
+    top = index[:, 2] == shape[2] - 1
     # q a^2 per top node; half of it on a symmetry plane, a quarter on both.
     force[top, 2] = -pressure * spacing ** 2 * 0.5 ** (on_plane[0] + on_plane[1])[top]
     fixed = np.zeros_like(position, bool)
@@ -180,8 +187,8 @@ def clamped_plate(cells, thickness_nodes, pressure=1000.0):
     matrix = stiffness_matrix(position, springs, stiffness)
     displacement, _ = static_displacement(matrix, force, fixed)
     middle = (on_plane[0] > 0) & (on_plane[1] > 0)
-    side, thickness = cells * spacing, DEPTH
-    rigidity = YOUNGS_MODULUS * thickness ** 3 / (12.0 * (1.0 - LATTICE_POISSON ** 2))
+    side, thickness = (shape[0] - 1) * spacing, (shape[2] - 1) * spacing
+    rigidity = spec["youngs_modulus"] * thickness ** 3 / (12.0 * (1.0 - LATTICE_POISSON ** 2))
     expected = KIRCHHOFF_CLAMPED_SQUARE * pressure * side ** 4 / rigidity
     deflection = -float(displacement[middle, 2].mean())
     return {"deflection": deflection, "expected": expected,
