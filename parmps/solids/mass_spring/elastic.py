@@ -51,6 +51,19 @@ mode of the lattice, omega_max^2 = 4 (k_a + k_d)/m (an x-polarised wave of
 wavenumber pi/a); lower modes get zeta omega_n/omega_max, so the body's
 bending modes are left practically undamped: it removes grid-scale ringing,
 it is not a structural damping of the fundamental mode.
+
+3D (shape (nx, ny, nz), docs/elastic_lattice.md "3D"): the simple cubic lattice with
+axial springs k_a and both diagonals k_f of every square face has C11 = (k_a + 2 k_f)/a,
+C12 = C44 = k_f/a (the Cauchy relation of central springs); isotropy needs
+k_a = k_f = k, so nu = 1/4 and E = 5 k/(2 a): k = 2 E a/5. Another nu keeps E (a
+beam's E I exact) with a warning stating the shear modulus 2E/5 against E/2(1 + nu).
+Nodes carry their share of the cells they touch (1/2, 1/4, 1/8 on a face, edge,
+corner); a spring is weighted by the share of the cells around it the body holds,
+and the outer layers' share is moved one layer inwards (alpha = 3m/72(m - 1) of the
+axial springs, beta = 7m/72(m - 1) of the face diagonals in planes parallel to a
+face, m cells across), which makes a beam's E I and a plate strip's D exact but for
+a residual below 0.3 % from 4 nodes through the depth. ``thickness`` and ``plane``
+are refused. omega_max^2 = (4 k_a + 8 k_f)/m.
 """
 
 import functools
