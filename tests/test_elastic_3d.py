@@ -299,3 +299,35 @@ def test_clamped_plate_within_5_percent_of_kirchhoff():
     measured = analysis.kirchhoff_plate(None, check.case(), **check.metric_arguments)
     assert measured["side"] / measured["thickness"] == pytest.approx(40)
     assert abs(measured["error"]) < check.tolerance["deflection"], measured
+
+
+@pytest.mark.parametrize("thickness_nodes", [3, 4, 5])
+def test_plate_twisting_stiffness_is_short_by_a_third_over_m_squared(thickness_nodes):
+    """The one plate modulus the outer-layer correction leaves: D66 = D(1 - nu)/2 = mu t^3/12
+    times 1 - 1/(3 m^2), m cells through the thickness (docs/elastic_lattice.md). Pure twist
+    w = k x y (u = -k z y, v = -k z x) held on the side faces is the lattice's equilibrium
+    inside; its energy per unit area is 2 D66 k^2."""
+    spacing, curvature = 0.01, 0.1
+    shape = (13, 13, thickness_nodes)
+    geometry = lattice_geometry(shape, spacing, (0.0, 0.0, 0.0))
+    material = elastic_lattice("plate", elastic_3d.plate_spec(spacing), shape, geometry.springs)
+    x, y, z = (geometry.position - geometry.position.mean(axis=0)).T
+    twist = curvature * np.column_stack([-z * y, -z * x, x * y])
+    index = np.rint(geometry.position / spacing).astype(int)
+    side = ((index[:, :2] == 0) | (index[:, :2] == shape[0] - 1)).any(axis=1)
+    matrix = stiffness_matrix(geometry.position, geometry.springs, material.stiffness)
+    displacement, _ = static_displacement(matrix, np.zeros_like(twist), side, twist)
+    assert np.allclose(displacement, twist, rtol=0, atol=1e-12 * np.abs(twist).max())
+    # The springs of the 6 x 6 squares in the middle: midpoints in a box of whole cells.
+    middle = 0.5 * (geometry.position[geometry.springs[:, 0]]
+                    + geometry.position[geometry.springs[:, 1]]) / spacing
+    inside = ((middle[:, :2] > 2.9) & (middle[:, :2] < 8.9)).all(axis=1)
+    separation = geometry.position[geometry.springs[:, 1]] - geometry.position[geometry.springs[:, 0]]
+    relative = twist[geometry.springs[:, 1]] - twist[geometry.springs[:, 0]]
+    stretch = np.einsum("ij,ij->i", separation, relative) / np.linalg.norm(separation, axis=1)
+    energy = 0.5 * (material.stiffness * stretch ** 2)[inside].sum() / (6 * spacing) ** 2
+    thickness = (thickness_nodes - 1) * spacing
+    twisting = elastic_3d.YOUNGS_MODULUS / (2 * (1 + NU)) * thickness ** 3 / 12
+    cells = thickness_nodes - 1
+    assert energy / (2 * twisting * curvature ** 2) == pytest.approx(1 - 1 / (3 * cells ** 2),
+                                                                      rel=1e-9)
