@@ -322,8 +322,9 @@ def test_plate_twisting_stiffness_is_short_by_a_third_over_m_squared(thickness_n
     middle = 0.5 * (geometry.position[geometry.springs[:, 0]]
                     + geometry.position[geometry.springs[:, 1]]) / spacing
     inside = ((middle[:, :2] > 2.9) & (middle[:, :2] < 8.9)).all(axis=1)
-    separation = geometry.position[geometry.springs[:, 1]] - geometry.position[geometry.springs[:, 0]]
-    relative = twist[geometry.springs[:, 1]] - twist[geometry.springs[:, 0]]
+    first, second = geometry.springs[:, 0], geometry.springs[:, 1]
+    separation = geometry.position[second] - geometry.position[first]
+    relative = twist[second] - twist[first]
     stretch = np.einsum("ij,ij->i", separation, relative) / np.linalg.norm(separation, axis=1)
     energy = 0.5 * (material.stiffness * stretch ** 2)[inside].sum() / (6 * spacing) ** 2
     thickness = (thickness_nodes - 1) * spacing

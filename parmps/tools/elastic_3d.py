@@ -43,7 +43,7 @@ DENSITY = 1000.0
 GRAVITY = 9.81
 TIP_LOAD = 0.01  # total [N]
 
-CASE = """title = "Clamped 3D elastic lattice cantilever, {n} x {n} nodes across, L/h = {slenderness}"
+CASE = """title = "Clamped 3D lattice cantilever, {n} x {n} nodes across, L/h = {slenderness}"
 [domain]
 lower = [{x0}, {x0}, {x0}]
 upper = [{x1}, {x1}, {x1}]
