@@ -246,11 +246,11 @@ def test_highest_mode_of_a_free_patch_has_the_damping_ratio():
     patch's highest mode is the infinite lattice's omega_max within 2 %."""
     body = build(f"youngs_modulus = {YOUNGS}\ndensity = 1000.0\ndamping_ratio = 0.3", nx=12,
                  ny=12)
-    matrix = stiffness_matrix(body.position, body.springs, body.stiffness)
+    matrix = stiffness_matrix(body.position, body.springs, body.stiffness).toarray()
     inverse_root_mass = 1 / np.sqrt(np.repeat(body.mass, 2))
     omega = np.sqrt(np.abs(np.linalg.eigvalsh(matrix * np.outer(inverse_root_mass,
                                                                  inverse_root_mass))))
-    damping = stiffness_matrix(body.position, body.springs, body.damping)
+    damping = stiffness_matrix(body.position, body.springs, body.damping).toarray()
     beta = damping[np.nonzero(matrix)][0] / matrix[np.nonzero(matrix)][0]
     assert np.allclose(damping, beta * matrix)
     cell_mass = 1000.0 * SPACING ** 2

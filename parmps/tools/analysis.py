@@ -315,7 +315,7 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
 
     (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
     nx, ny, spacing = spec["nx"], spec["ny"], spec["spacing"]
-    rest, _, _, _ = lattice_geometry(nx, ny, spacing, spec["lower"])
+    rest, _, _, _ = lattice_geometry((nx, ny), spacing, spec["lower"])
     pinned = np.zeros(len(rest), bool)
     if spec["pinned"] != "none":
         pinned[node_set(body, spec["pinned"], rest, shape=(nx, ny))] = True
@@ -351,6 +351,91 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
             "amplitude": float(0.5 * np.ptp(settled)) if len(settled) else math.nan,
             "span": float(span), "load": float(load), "bending_stiffness": float(bending),
             "time": times, "series": deflection}
+
+
+def crossing_period(times, series):
+    """The period of an oscillating series: a straight line through the times it crosses its
+    mean (interpolated), so no single crossing sets it. NaN with fewer than three."""
+    value = np.asarray(series) - np.mean(series)
+    sign = np.signbit(value)
+    k = np.flatnonzero(sign[1:] != sign[:-1])
+    if len(k) < 3:
+        return math.nan
+    crossings = times[k] + (times[k + 1] - times[k]) * value[k] / (value[k] - value[k + 1])
+    return 2.0 * float(np.polyfit(np.arange(len(crossings)), crossings, 1)[0])
+
+
+def cantilever_period(path, case, body="beam", settle_time=0.0):
+    """A clamped lattice cantilever swinging (validation/cantilever_3d/): the period of its
+    free end's deflection against Euler-Bernoulli's 2 pi/omega_1,
+    omega_1 = 1.8751^2 sqrt(E I/(rho A L^4)).
+
+    From ``case``: the lattice body named ``body`` lies along x, clamped at its left end,
+    and bends along the last axis; L and the depth h are the distances between its outer
+    nodes along x and along the last axis; its width b is (ny - 1) spacing in 3D (E the
+    material's) and ``thickness`` in 2D (E2 = E/(1 - nu^2) in plane strain, nu the
+    lattice's). The deflection is the mean displacement of the right end's nodes along
+    the last axis, from ``settle_time`` on. Returns ``period``, ``expected``, ``error``
+    (relative), ``mean_deflection`` and the series ``time`` and ``series``.
+    """
+    from parmps.solids.mass_spring.elastic import REPRESENTABLE_POISSON, plane_modulus
+
+    (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
+    shape = [spec["nx"], spec["ny"]] + ([spec["nz"]] if spec.get("nz") else [])
+    spacing = spec["spacing"]
+    length, depth = (shape[0] - 1) * spacing, (shape[-1] - 1) * spacing
+    if len(shape) == 3:
+        width, modulus = (shape[1] - 1) * spacing, spec["youngs_modulus"]
+    else:
+        poisson = spec["poisson_ratio"]
+        if poisson is None:
+            poisson = REPRESENTABLE_POISSON[spec["plane"]]
+        width = spec["thickness"]
+        modulus, _ = plane_modulus(spec["youngs_modulus"], poisson, spec["plane"])
+    bending = modulus * width * depth ** 3 / 12.0
+    line_mass = spec["density"] * width * depth
+    omega = 1.8751040687119611 ** 2 * math.sqrt(bending / (line_mass * length ** 4))
+    with open_result(path) as result:
+        times = np.asarray(result.frames.times)
+        rest = result.frames[0].bodies[body]["position"]
+        tip = np.isclose(rest[:, 0], rest[:, 0].max())
+        deflection = np.array([float(np.mean(frame.bodies[body]["position"][tip, -1]
+                                             - rest[tip, -1])) for frame in result.frames])
+    later = times >= settle_time
+    period = crossing_period(times[later], deflection[later])
+    expected = 2.0 * math.pi / omega
+    return {"period": period, "expected": expected, "error": period / expected - 1.0,
+            "mean_deflection": float(np.mean(deflection[later])), "time": times,
+            "series": deflection}
+
+
+def kirchhoff_plate(path, case, body="plate"):
+    """The clamped square plate of validation/kirchhoff_plate/ against Kirchhoff's centre
+    deflection 0.00126 q a^4/D, D = E t^3/12(1 - nu^2) with the lattice's nu = 1/4.
+
+    A static figure: the linear statics of the plate ``case`` describes (the lattice body
+    named ``body``, n x n x nt nodes, pinned on its four side faces, its one load on its top
+    nodes a pressure q = -force_z / spacing^2), solved on a quadrant
+    (parmps.tools.elastic_3d.clamped_plate_deflection); the run's frames are not read.
+    Returns ``deflection``, ``expected``, ``error``, ``side``, ``thickness``, ``nodes``.
+    """
+    from parmps.solids.mass_spring.build import node_set
+    from parmps.tools import elastic_3d
+
+    (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
+    shape, spacing = (spec["nx"], spec["ny"], spec["nz"]), spec["spacing"]
+    position = spacing * np.indices(shape[::-1]).reshape(3, -1)[::-1].T
+    index = np.rint(position / spacing).astype(int)
+    sides = ((index[:, :2] == 0) | (index[:, :2] == np.array(shape[:2]) - 1)).any(axis=1)
+    pinned = np.zeros(len(position), bool)
+    pinned[node_set(body, "ids", position, ids=spec["pinned_ids"])] = True
+    (load,) = spec["load"]
+    if shape[0] != shape[1] or shape[0] % 2 == 0 or not np.array_equal(pinned, sides) \
+            or load["nodes"] != "top":
+        raise ValueError(f"body '{body}' is not a square plate (odd n) clamped on its four "
+                         f"side faces under a load on its top nodes")
+    pressure = -load["force"][2] / spacing ** 2
+    return elastic_3d.clamped_plate_deflection(shape, spacing, spec, pressure)
 
 
 def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate"):
