@@ -2,8 +2,12 @@
 
 import math
 
-from parmps.config import Key, Section
+from parmps.config import ZERO, Key, Section
+from parmps.core.settings import PARTICLE_SECTIONS
 from parmps.errors import CaseError
+
+# The sides of a body a node set may name: x, y (3D only) and the last axis.
+SIDES = ("left", "right", "front", "back", "bottom", "top")
 
 SECTIONS = {
     "solid": Section({
@@ -13,20 +17,28 @@ SECTIONS = {
                        doc="fixed solid substep [s]; 0 chooses it from the stiffest node"),
         "safety": Key("float", 0.5, gt=0.0, le=1.0,
                       doc="automatic substep = safety x the Verlet stability limit"),
-        "constraint_prediction": Key("str", "linear", choices=("linear", "quadratic"),
-                                     doc="linear: the area multiplier of docs/design.md §1.5; "
-                                         "quadratic: also predicts the area swept in a "
-                                         "substep (rotating bodies)"),
+        "constraint_prediction": Key("str", "iterated",
+                                     choices=("iterated", "linear", "quadratic"),
+                                     doc="iterated: the volume multiplier of docs/design.md "
+                                         "§1.5, then Newton steps on it until the next "
+                                         "substep's volume is within constraint_tolerance; "
+                                         "linear: the single solve alone; quadratic: the "
+                                         "earlier name of iterated, which it now means"),
+        "constraint_tolerance": Key("float", 1e-12, gt=0.0, lt=1e-6,
+                                    doc="iterated: largest relative volume error predicted "
+                                        "for the next substep"),
     }, doc="mass-spring solver settings shared by every body"),
     "body": Section({
         "name": Key("str", "", doc="used in the output; default body<k>"),
         "type": Key("str", "lattice", choices=("lattice", "general"),
-                    doc="\"lattice\": nx by ny nodes with springs generated; \"general\": "
-                        "nodes, springs and boundary loop given"),
+                    doc="\"lattice\": nx by ny (by nz) nodes with springs generated; "
+                        "\"general\" (2D): nodes, springs and boundary loop given"),
         "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
         "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
+        "nz": Key("int", 0, ge=0, doc="3D lattice: nodes along z"),
         "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
-        "lower": Key("vec2", [0.0, 0.0], doc="lattice: position of the lower-left node"),
+        "lower": Key("vector", ZERO, doc="lattice: position of the node with the smallest "
+                                         "coordinates"),
         "nodes": Key("points", [], doc="general: node positions [[x, y], ...]"),
         "springs": Key("pairs", [], doc="general: springs as node index pairs [[i, j], ...]"),
         "boundary": Key("ints", [], doc="general: the boundary loop, counter-clockwise"),
@@ -35,7 +47,7 @@ SECTIONS = {
                                 doc="general: one stiffness per spring [N/m]"),
         "node_mass": Key("float", 0.0, ge=0.0, doc="mass of every node [kg]"),
         "density": Key("float", 0.0, ge=0.0,
-                       doc="lattice: node mass = density x spacing^2 (per unit depth); "
+                       doc="lattice: node mass = density x spacing^d (2D: per unit depth); "
                            "with youngs_modulus: density x thickness x spacing^2 x the "
                            "share of the cells the node touches"),
         "stiffness": Key("float", None, gt=0.0,
@@ -62,11 +74,13 @@ SECTIONS = {
                              doc="with youngs_modulus: damping ratio of the lattice's highest "
                                  "mode, from dashpots along the springs (mode n gets "
                                  "zeta omega_n/omega_max)"),
-        "volume_constraint": Key("bool", True, doc="keep the boundary polygon's area"),
+        "volume_constraint": Key("bool", True, doc="keep the volume the boundary encloses "
+                                                   "(the polygon's area in 2D)"),
         "gravity": Key("bool", True, doc="feel physics.gravity"),
-        "velocity": Key("vec2", [0.0, 0.0], doc="initial velocity of every node [m/s]"),
-        "pinned": Key("str", "none", choices=("none", "top", "bottom", "left", "right", "all"),
-                      doc="a side whose nodes never move"),
+        "velocity": Key("vector", ZERO, doc="initial velocity of every node [m/s]"),
+        "pinned": Key("str", "none", choices=("none",) + SIDES + ("all",),
+                      doc="a side whose nodes never move (front/back: the y sides of a 3D "
+                          "body; top/bottom: the last axis, y in 2D, z in 3D)"),
         "pinned_ids": Key("ints", [], ge=0, doc="more nodes that never move"),
         "anchors": Key("points", [], doc="fixed points (e.g. on a rigid wall) that close the "
                                          "boundary polygon: the area kept is the one between "
@@ -76,13 +90,13 @@ SECTIONS = {
                               "order) and then this row (bottom: right to left; top: left "
                               "to right)"),
         "load": Key("tables", [], keys={
-            "nodes": Key("str", choices=("top", "bottom", "left", "right", "all", "row",
-                                         "column", "ids"),
-                         doc="which nodes the force acts on: a side, all, a row or column "
-                             "(index), or listed ids"),
-            "index": Key("int", 0, ge=0, doc="the row or column (from 0 at bottom/left)"),
+            "nodes": Key("str", choices=SIDES + ("all", "row", "column", "layer", "ids"),
+                         doc="which nodes the force acts on: a side, all, a 2D lattice's row "
+                             "or column or a 3D lattice's layer (index), or listed ids"),
+            "index": Key("int", 0, ge=0, doc="the row, column or layer (from 0 at "
+                                             "bottom/left; a layer: nodes k = index along z)"),
             "ids": Key("ints", [], ge=0, doc="the nodes, with nodes = \"ids\""),
-            "force": Key("vec2", doc="force on each node of the set [N]"),
+            "force": Key("vector", doc="force on each node of the set [N]"),
             "start": Key("float", 0.0, ge=0.0, doc="[s]"),
             "end": Key("float", math.inf, gt=0.0, doc="[s]; default: never ends"),
             "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
@@ -92,10 +106,12 @@ SECTIONS = {
 
 
 def check_dimension_support(raw, dimension):
-    """Bodies are 2D so far: a 3D case with a [[body]] is refused in one line."""
-    if dimension != 2 and raw.get("body"):
-        raise CaseError(f"[[body]]: solid bodies run in 2D cases only so far; this case is "
-                        f"{dimension}D (domain.lower has {dimension} components)")
+    """Solid-only 3D cases run; bodies in a 3D case with fluid are refused in one line."""
+    particles = [name for name in PARTICLE_SECTIONS if raw.get(name)]
+    if dimension != 2 and raw.get("body") and particles:
+        raise CaseError(f"[[body]] with [{particles[0]}]: the fluid-solid coupling runs in 2D "
+                        f"cases only so far; this case is {dimension}D (domain.lower has "
+                        f"{dimension} components); a 3D case may have bodies without fluid")
 
 
 def check(case):

@@ -315,7 +315,7 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
 
     (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
     nx, ny, spacing = spec["nx"], spec["ny"], spec["spacing"]
-    rest, _, _, _ = lattice_geometry(nx, ny, spacing, spec["lower"])
+    rest, _, _, _ = lattice_geometry((nx, ny), spacing, spec["lower"])
     pinned = np.zeros(len(rest), bool)
     if spec["pinned"] != "none":
         pinned[node_set(body, spec["pinned"], rest, shape=(nx, ny))] = True

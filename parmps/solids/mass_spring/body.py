@@ -1,14 +1,16 @@
-"""Mass-spring solids that keep their area (docs/design.md §1.5).
+"""Mass-spring solids that keep their volume (docs/design.md §1.5), in any dimension d.
 
-Physics on plain numpy arrays: spring, damping and external forces, the area
-of a body's boundary polygon and its gradient, the Lagrange multiplier that
-holds that area, the Verlet stability limit and the substep loop. Nothing here
+Physics on plain numpy arrays: spring, damping and external forces, the
+volume a body's boundary encloses (its area in 2D) and the Lagrange multiplier
+that holds it, the Verlet stability limit and the substep loop. Nothing here
 imports PETSc or any fluid machinery, so a solid-only case stays light.
 
-A body is a set of nodes (positions, velocities, masses) joined by springs
-(node index pairs with rest length, stiffness and damping). Pinned nodes have
-zero inverse mass: no force moves them and the constraint treats them as rigid,
-which is also how a boundary polygon closes over wall nodes.
+A body is a set of nodes (positions and velocities (n, d), masses) joined by
+springs (node index pairs with rest length, stiffness and damping). Its
+boundary is a set of outward facets (:mod:`parmps.solids.mass_spring.surface`):
+the edges of a counter-clockwise node loop in 2D, triangles in 3D. Pinned
+nodes have zero inverse mass: no force moves them and the constraint treats
+them as rigid, which is also how a boundary closes over wall nodes.
 
 Velocity Verlet, with forces evaluated at the new position and the half-step
 velocity (damping is velocity dependent, so the full-step velocity is not yet
@@ -25,10 +27,13 @@ when its ``qdot`` is the half-step velocity:
 
     lambda = [Phi/dt^2 + gradPhi . (qdot/dt + M^-1 F)] / (gradPhi . M^-1 gradPhi)
 
-so the area error stays at the level of the quadratic term: the area swept by
-the step's displacement, about dt^2 |v|^2 (dt^2 Omega^2 V for a body rotating
-at Omega). It does not accumulate: the next multiplier removes it. With
-``[solid] constraint_prediction = "quadratic"`` that term is predicted too.
+That alone leaves the volume swept by the step's displacement, about
+dt^2 |v|^2 (dt^2 Omega^2 V for a body rotating at Omega); it does not
+accumulate, but it is 1e-7 of the area for the seed's 7x7 body. So by default
+(``[solid] constraint_prediction = "iterated"``) lambda is then corrected by
+Newton steps on the true volume of the predicted x_{n+2} until its relative
+error is below ``constraint_tolerance`` (:func:`volume_multiplier`);
+``"linear"`` keeps the single solve.
 """
 
 import logging
@@ -38,6 +43,7 @@ import numpy as np
 
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.kernels import held_force_substeps, network_forces
+from parmps.solids.mass_spring.surface import enclosed_volume, volume_gradient
 
 log = logging.getLogger(__name__)
 
@@ -47,17 +53,18 @@ log = logging.getLogger(__name__)
 
 
 def _scatter(n_nodes, springs, pair_force):
-    """Add +pair_force to node i and -pair_force to node j of every spring."""
+    """Add +pair_force to node i and -pair_force to node j of every spring; (n, d)."""
     i, j = springs[:, 0], springs[:, 1]
-    force = np.empty((n_nodes, 2))
-    for axis in range(2):
+    d = pair_force.shape[1]
+    force = np.empty((n_nodes, d))
+    for axis in range(d):
         force[:, axis] = (np.bincount(i, weights=pair_force[:, axis], minlength=n_nodes)
                           - np.bincount(j, weights=pair_force[:, axis], minlength=n_nodes))
     return force
 
 
 def spring_forces(position, springs, rest_length, stiffness):
-    """Hooke forces ``-k (|l| - l0) l/|l|`` on every node, l = x_i - x_j; shape (n, 2)."""
+    """Hooke forces ``-k (|l| - l0) l/|l|`` on every node, l = x_i - x_j; shape (n, d)."""
     separation = position[springs[:, 0]] - position[springs[:, 1]]
     length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
     # A collapsed spring has no direction; it exerts no force rather than NaN.
@@ -67,7 +74,7 @@ def spring_forces(position, springs, rest_length, stiffness):
 
 
 def damping_forces(velocity, springs, damping):
-    """Damping ``-b (v_i - v_j)`` on every node; shape (n, 2)."""
+    """Damping ``-b (v_i - v_j)`` on every node; shape (n, d)."""
     relative = velocity[springs[:, 0]] - velocity[springs[:, 1]]
     return _scatter(len(velocity), springs, -damping[:, None] * relative)
 
@@ -97,30 +104,37 @@ def load_factor(time, start, end, ramp):
 
 
 # --------------------------------------------------------------------------
-# Area of the boundary polygon and its constraint
+# The enclosed volume and its constraint (any d: parmps.solids.mass_spring.surface)
+
+
+def loop_facets(loop):
+    """The facets (i, i+1) of a closed node loop: its edges, last to first included."""
+    loop = np.asarray(loop, dtype=np.int64)
+    return np.column_stack([loop, np.roll(loop, -1)])
+
+
+def boundary_facets(boundary):
+    """A body's boundary as facets (m, d): a 2D loop's edges, or the given facets."""
+    boundary = np.asarray(boundary, dtype=np.int64)
+    return loop_facets(boundary) if boundary.ndim == 1 else boundary
 
 
 def polygon_area(position, loop):
-    """Signed area ``1/2 sum (x_i y_{i+1} - x_{i+1} y_i)``: positive counter-clockwise."""
-    p = position[loop]
-    q = np.roll(p, -1, axis=0)
-    return 0.5 * float(np.sum(p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]))
+    """Signed area of a node loop: positive counter-clockwise (2D :func:`enclosed_volume`)."""
+    return enclosed_volume(position, loop_facets(loop))
 
 
 def area_gradient(position, loop):
     """dV/dx_i = (y_{i+1} - y_{i-1})/2, dV/dy_i = (x_{i-1} - x_{i+1})/2 for the loop nodes."""
-    p = position[loop]
-    after = np.roll(p, -1, axis=0)
-    before = np.roll(p, 1, axis=0)
-    return 0.5 * np.column_stack([after[:, 1] - before[:, 1], before[:, 0] - after[:, 0]])
+    return volume_gradient(position, loop_facets(loop))[np.asarray(loop)]
 
 
 def area_multiplier(phi, gradient, velocity, inverse_mass, force, dt):
     """The Lagrange multiplier of docs/design.md §1.5 (seed eq. 12 with Phi_t = 0).
 
-    ``gradient``, ``velocity``, ``force`` are (m, 2) on the loop nodes and
+    ``gradient``, ``velocity``, ``force`` are (m, d) on the boundary nodes and
     ``inverse_mass`` (m,) (0 for pinned nodes). The constraint force is
-    ``-gradient * lambda``. Returns 0 when no loop node can move.
+    ``-gradient * lambda``. Returns 0 when no boundary node can move.
     """
     weighted = gradient * inverse_mass[:, None]
     denominator = float(np.sum(weighted * gradient))
@@ -129,6 +143,40 @@ def area_multiplier(phi, gradient, velocity, inverse_mass, force, dt):
     numerator = (phi / dt ** 2 + float(np.sum(gradient * velocity)) / dt
                  + float(np.sum(weighted * force)))
     return numerator / denominator
+
+
+def volume_multiplier(position, facets, rest_volume, velocity, inverse_mass, force, dt,
+                      tolerance=0.0, iterations=0):
+    """The multiplier that puts the next substep's boundary on its rest volume.
+
+    Arrays on the boundary nodes: ``position``, ``velocity`` (the half-step
+    velocity), ``force`` (everything but the constraint) (s, d), ``inverse_mass``
+    (s,), ``facets`` indexing them. Starts from eq. 12 (:func:`area_multiplier`),
+    which zeroes the next position's volume to first order, then takes up to
+    ``iterations`` Newton steps on lambda alone (as SHAKE does), each on the true
+    volume of the predicted position x + dt v + dt^2 M^-1 (F - gradV lambda) with
+    gradV held at x, until |V - V0| <= tolerance V0. Returns (lambda, gradV (s, d),
+    the Newton steps taken).
+    """
+    gradient = volume_gradient(position, facets)
+    phi = enclosed_volume(position, facets) - rest_volume
+    multiplier = area_multiplier(phi, gradient, velocity, inverse_mass, force, dt)
+    if iterations <= 0 or multiplier == 0.0:
+        return multiplier, gradient, 0
+    free = position + dt * velocity + dt ** 2 * inverse_mass[:, None] * force
+    push = dt ** 2 * inverse_mass[:, None] * gradient
+    limit = tolerance * abs(rest_volume)
+    for step in range(iterations):
+        predicted = free - push * multiplier
+        residual = enclosed_volume(predicted, facets) - rest_volume
+        if abs(residual) <= limit:
+            return multiplier, gradient, step
+        # d residual / d lambda = -gradV(predicted) . M^-1 gradV dt^2.
+        slope = float(np.sum(volume_gradient(predicted, facets) * push))
+        if slope <= 0.0:
+            return multiplier, gradient, step
+        multiplier += residual / slope
+    return multiplier, gradient, iterations
 
 
 # --------------------------------------------------------------------------
@@ -181,20 +229,21 @@ def substep_count(dt_outer, dt_sub):
 
 
 class Body:
-    """One mass-spring body: arrays, the boundary loop and its windowed loads.
+    """One mass-spring body: arrays, the boundary facets and its windowed loads.
 
     The arrays are owned by the body and updated in place by :meth:`advance`.
+    ``boundary``: a 2D node loop (counter-clockwise) or facets (m, d).
     Build bodies with :func:`parmps.solids.mass_spring.build.build_bodies`; this class checks
     nothing about the input.
     """
 
     def __init__(self, name, position, velocity, mass, springs, stiffness, damping,
-                 boundary, volume_constraint=True, pinned=None, gravity=(0.0, 0.0),
+                 boundary, volume_constraint=True, pinned=None, gravity=None,
                  loads=(), anchors=0, outline=None, axial_damping=False):
         self.name = name
-        self.position = np.array(position, dtype=float).reshape(-1, 2)
-        self.velocity = np.array(velocity, dtype=float).reshape(-1, 2)
-        n = len(self.position)
+        self.position = np.array(np.atleast_2d(position), dtype=float)
+        n, d = self.position.shape
+        self.velocity = np.array(velocity, dtype=float).reshape(n, d)
         self.mass = np.broadcast_to(np.asarray(mass, dtype=float), (n,)).copy()
         self.springs = np.asarray(springs, dtype=np.int64).reshape(-1, 2)
         m = len(self.springs)
@@ -206,38 +255,57 @@ class Body:
         separation = self.position[self.springs[:, 0]] - self.position[self.springs[:, 1]]
         self.rest_length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
         self.boundary = np.asarray(boundary, dtype=np.int64)
+        self._set_surface(boundary_facets(self.boundary) if self.boundary.size
+                          else np.empty((0, d), np.int64))
         # The last ``anchors`` nodes are fixed points that close the boundary
-        # polygon (over a rigid wall): pinned, no springs, not part of the material.
+        # (over a rigid wall): pinned, no springs, not part of the material.
         self.n_material = n - int(anchors)
-        # The material's own outline (the boundary loop unless anchors close it).
+        # The material's own outline (the boundary unless anchors close it).
         self.outline = self.boundary if outline is None else np.asarray(outline, np.int64)
-        self.volume_constraint = bool(volume_constraint) and len(self.boundary) >= 3
         self.pinned = np.zeros(n, bool) if pinned is None else np.asarray(pinned, bool).copy()
         self.inverse_mass = np.where(self.pinned, 0.0, 1.0 / self.mass)
         self.velocity[self.pinned] = 0.0
-        self.gravity = np.asarray(gravity, dtype=float)
-        # Loads as arrays: per-load force fields (L, n, 2) and windows, so the
-        # external force at time t is one tensordot.
-        loads = list(loads)
-        self.load_field = np.zeros((len(loads), n, 2))
+        self.gravity = np.zeros(d) if gravity is None else np.asarray(gravity, dtype=float)
+        self._set_loads(list(loads))
+        self.rest_volume = self.volume() if len(self.facets) else 0.0
+        self.volume_constraint = bool(volume_constraint) and self.rest_volume != 0.0
+        self.fluid_force = np.zeros((n, d))
+        self.acceleration = None  # set by the first force evaluation
+        # Newton steps on the multiplier (see volume_multiplier); set by MassSpringModel.
+        self.constraint_iterations = 0
+        self.constraint_tolerance = 0.0
+        self.multiplier = 0.0
+        self.newton_steps = 0  # the most any substep of the last advance took
+
+    def _set_surface(self, facets):
+        """The boundary facets, and the same facets over the boundary nodes alone: the
+        constraint works on those."""
+        self.facets = np.asarray(facets, dtype=np.int64)
+        self.surface_nodes = np.unique(self.facets)
+        self.surface_facets = np.searchsorted(self.surface_nodes, self.facets)
+
+    def _set_loads(self, loads):
+        """Loads as arrays: per-load force fields (L, n, d) and windows, so the
+        external force at time t is one tensordot."""
+        self.load_field = np.zeros((len(loads),) + self.position.shape)
         for k, (nodes, force, _, _, _) in enumerate(loads):
             self.load_field[k, nodes] = force
         self.load_start = np.array([load[2] for load in loads], dtype=float)
         self.load_end = np.array([load[3] for load in loads], dtype=float)
         self.load_ramp = np.array([load[4] for load in loads], dtype=float)
-        self.rest_volume = self.volume() if len(self.boundary) >= 3 else 0.0
-        self.fluid_force = np.zeros((n, 2))
-        self.acceleration = None  # set by the first force evaluation
-        self.quadratic_prediction = False  # True: see MassSpringModel's constraint_prediction
-        self.multiplier = 0.0
 
     # -- geometry and diagnostics --------------------------------------------
     @property
     def n_nodes(self):
         return len(self.position)
 
+    @property
+    def dimension(self):
+        return self.position.shape[1]
+
     def volume(self):
-        return polygon_area(self.position, self.boundary)
+        """The volume the boundary facets enclose (the area in 2D)."""
+        return enclosed_volume(self.position[self.surface_nodes], self.surface_facets)
 
     def volume_error(self):
         """(V - V0)/V0 of the boundary polygon (0 for a body without one)."""
@@ -280,24 +348,14 @@ class Body:
         network_forces(self.position, velocity, self.springs, self.rest_length, self.stiffness,
                        self.damping, self.axial_damping, force)
         if self.volume_constraint:
-            loop = self.boundary
-            gradient = area_gradient(self.position, loop)
-            phi = self.volume() - self.rest_volume
-            inverse_mass = self.inverse_mass[loop]
-            self.multiplier = area_multiplier(phi, gradient, velocity[loop], inverse_mass,
-                                              force[loop], dt)
-            if self.quadratic_prediction:
-                # V is quadratic in the positions, so V(x + d) = V(x) + gradV.d + V(d)
-                # exactly. The linear prediction misses V(d), about dt^2 Omega^2 V for
-                # a body spinning at Omega; one more pass with it added removes that.
-                step = dt * velocity[loop] + dt ** 2 * inverse_mass[:, None] * (
-                    force[loop] - gradient * self.multiplier)
-                swept = polygon_area(step, np.arange(len(loop)))
-                self.multiplier = area_multiplier(phi + swept, gradient, velocity[loop],
-                                                  inverse_mass, force[loop], dt)
-            # Loop nodes may repeat only if the loop is invalid (refused on
-            # input), so plain fancy-index subtraction is safe here.
-            force[loop] -= gradient * self.multiplier
+            nodes = self.surface_nodes
+            self.multiplier, gradient, steps = volume_multiplier(
+                self.position[nodes], self.surface_facets, self.rest_volume, velocity[nodes],
+                self.inverse_mass[nodes], force[nodes], dt, self.constraint_tolerance,
+                self.constraint_iterations)
+            self.newton_steps = max(self.newton_steps, steps)
+            # surface_nodes are unique, so plain fancy-index subtraction is safe.
+            force[nodes] -= gradient * self.multiplier
         return force * self.inverse_mass[:, None]
 
     def advance(self, time, dt_outer, dt_sub):
@@ -307,6 +365,7 @@ class Body:
         if self.acceleration is None:
             self.acceleration = self.acceleration_at(time, self.velocity, h)
         position, velocity = self.position, self.velocity
+        self.newton_steps = 0
         if not self.volume_constraint and not len(self.load_field):
             # Nothing in the force but the springs changes within the step: the whole
             # substep loop runs compiled (a stiff body takes ~1000 substeps a step).

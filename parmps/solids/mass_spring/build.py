@@ -2,18 +2,22 @@
 
 Two kinds of body:
 
-- ``type = "lattice"``: nx x ny nodes at ``lower + (i, j) spacing``, node index
-  ``i + nx j`` (row by row from the bottom-left), structural springs between
-  horizontal and vertical neighbours (``stiffness``) and both diagonals of every
-  cell (``shear_stiffness``). Its boundary loop is derived, counter-clockwise.
-- ``type = "general"``: ``nodes``, ``springs`` (index pairs) and a named
+- ``type = "lattice"``: nx x ny (x nz in 3D) nodes at ``lower + (i, j[, k])
+  spacing``, node index ``i + nx j (+ nx ny k)``, structural springs between
+  neighbours along every axis (``stiffness``) and both diagonals of every square
+  in every coordinate plane (``shear_stiffness``)
+  (:mod:`parmps.solids.mass_spring.lattice`). Its boundary is derived: the
+  counter-clockwise loop in 2D, the outward triangles of its surface in 3D.
+- ``type = "general"`` (2D): ``nodes``, ``springs`` (index pairs) and a named
   ``boundary`` loop. A loop given clockwise is refused (not silently reversed),
   with a message saying to reverse it, so the node order the user sees in the
   output is the one they wrote.
 
-Node sets (for ``pinned`` and ``[[body.load]]``): a side (``top``, ``bottom``,
-``left``, ``right``: the nodes at the extreme coordinate), ``all``, a lattice
-``row`` or ``column`` (``index`` from 0 at the bottom/left), or listed ``ids``.
+Node sets (for ``pinned`` and ``[[body.load]]``): a side (the nodes at the
+extreme coordinate: ``left``/``right`` along x, ``front``/``back`` along y in
+3D, ``bottom``/``top`` along the last axis, y in 2D and z in 3D), ``all``, a 2D
+lattice's ``row`` or ``column`` or a 3D lattice's ``layer`` (``index`` from 0
+at the bottom/left), or listed ``ids``.
 
 Every problem is a one-line :class:`CaseError` naming the body and the key.
 """
@@ -26,35 +30,16 @@ from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
+from parmps.solids.mass_spring.lattice import FACE_DIAGONAL, lattice_geometry  # noqa: F401
 
 log = logging.getLogger(__name__)
 
-LATTICE_ONLY = ("nx", "ny", "spacing", "density", "shear_stiffness", "youngs_modulus")
+LATTICE_ONLY = ("nx", "ny", "nz", "spacing", "density", "shear_stiffness", "youngs_modulus")
 GENERAL_ONLY = ("nodes", "springs", "boundary", "masses", "spring_stiffness")
 
 
 def _label(k, spec):
     return f"body[{k}]" + (f" '{spec['name']}'" if spec["name"] else "")
-
-
-def lattice_geometry(nx, ny, spacing, lower):
-    """Positions, springs (index pairs), which springs are shear, and the CCW boundary loop."""
-    i, j = np.meshgrid(np.arange(nx), np.arange(ny), indexing="xy")
-    i, j = i.ravel(), j.ravel()
-    position = np.column_stack([lower[0] + i * spacing, lower[1] + j * spacing])
-    index = np.arange(nx * ny).reshape(ny, nx)
-    horizontal = np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])
-    vertical = np.column_stack([index[:-1, :].ravel(), index[1:, :].ravel()])
-    diagonal = np.column_stack([index[:-1, :-1].ravel(), index[1:, 1:].ravel()])
-    anti_diagonal = np.column_stack([index[:-1, 1:].ravel(), index[1:, :-1].ravel()])
-    springs = np.concatenate([horizontal, vertical, diagonal, anti_diagonal])
-    shear = np.zeros(len(springs), bool)
-    shear[len(horizontal) + len(vertical):] = True
-    # Counter-clockwise: bottom row left to right, right column up, top row
-    # right to left, left column down; each corner once.
-    boundary = np.concatenate([index[0, :], index[1:, -1], index[-1, -2::-1],
-                               index[-2:0:-1, 0]])
-    return position, springs, shear, boundary
 
 
 def _segments_cross(a, b, c, d, scale):
@@ -119,29 +104,50 @@ def check_boundary(label, position, loop):
 
 
 def _sides(position):
-    """Node masks of the four sides: nodes at the extreme coordinate (within rounding)."""
+    """Node masks of the sides: nodes at the extreme coordinate (within rounding)."""
     extent = max(float(np.ptp(position, axis=0).max()), 1e-300)
     tol = 1e-9 * extent
-    x, y = position[:, 0], position[:, 1]
-    return {"bottom": y <= y.min() + tol, "top": y >= y.max() - tol,
-            "left": x <= x.min() + tol, "right": x >= x.max() - tol,
-            "all": np.ones(len(position), bool)}
+    d = position.shape[1]
+    axes = {"left": 0, "right": 0, "bottom": d - 1, "top": d - 1}
+    if d == 3:
+        axes.update(front=1, back=1)
+    sides = {"all": np.ones(len(position), bool)}
+    for name, axis in axes.items():
+        x = position[:, axis]
+        low = name in ("left", "bottom", "front")
+        sides[name] = x <= x.min() + tol if low else x >= x.max() - tol
+    return sides
+
+
+# The lattice words of a node set: (the lattice axis the index runs along,
+# the dimension the word belongs to). A row is the nodes of one j.
+LATTICE_SETS = {"row": (1, 2), "column": (0, 2), "layer": (2, 3)}
+
+
+def _lattice_set(label, what, index, shape):
+    """The nodes of a lattice's row, column or layer ``index``."""
+    if shape is None:
+        raise CaseError(f"{label}.nodes = \"{what}\" needs a lattice body; use "
+                        f"\"ids\" for a general body")
+    axis, dimension = LATTICE_SETS[what]
+    if len(shape) != dimension:
+        words = ", ".join(w for w, (_, e) in LATTICE_SETS.items() if e == len(shape))
+        raise CaseError(f"{label}.nodes = \"{what}\" names a set of a {dimension}D lattice; "
+                        f"this body is {len(shape)}D (use {words}, a side or ids)")
+    count = shape[axis]
+    size = "x".join(str(n) for n in shape)
+    if index >= count:
+        raise CaseError(f"{label}.index {index} is not a {what} of the {size} lattice "
+                        f"(0..{count - 1})")
+    grid = np.arange(int(np.prod(shape))).reshape(shape[::-1])
+    return np.take(grid, index, axis=len(shape) - 1 - axis).ravel()
 
 
 def node_set(label, what, position, index=0, ids=(), shape=None):
     """Indices of the nodes a pinned side or a load names."""
     n = len(position)
-    if what in ("row", "column"):
-        if shape is None:
-            raise CaseError(f"{label}.nodes = \"{what}\" needs a lattice body; use "
-                            f"\"ids\" for a general body")
-        nx, ny = shape
-        count = ny if what == "row" else nx
-        if index >= count:
-            raise CaseError(f"{label}.index {index} is not a {what} of the {nx}x{ny} lattice "
-                            f"(0..{count - 1})")
-        grid = np.arange(nx * ny).reshape(ny, nx)
-        return grid[index, :] if what == "row" else grid[:, index]
+    if what in LATTICE_SETS:
+        return _lattice_set(label, what, index, shape)
     if what == "ids":
         ids = np.asarray(ids, dtype=np.int64)
         if not len(ids):
@@ -151,7 +157,11 @@ def node_set(label, what, position, index=0, ids=(), shape=None):
             raise CaseError(f"{label}.ids names node {int(bad[0])}, but the body has "
                             f"{n} nodes (0..{n - 1})")
         return np.unique(ids)
-    return np.flatnonzero(_sides(position)[what])
+    sides = _sides(position)
+    if what not in sides:
+        raise CaseError(f"{label}: \"{what}\" names a side of a 3D body (along y); in 2D "
+                        f"the sides are left, right, bottom and top")
+    return np.flatnonzero(sides[what])
 
 
 def _check_springs(label, springs, n):
@@ -169,29 +179,38 @@ def _check_springs(label, springs, n):
         raise CaseError(f"{label}.springs[{row}] joins node {springs[row, 0]} to itself")
 
 
-def _lattice(label, spec):
+def _lattice_shape(label, spec, dimension):
+    """(nx, ny) or (nx, ny, nz), checked."""
+    names = ("nx", "ny", "nz")[:dimension]
+    if dimension == 2 and spec["nz"]:
+        raise CaseError(f"{label}.nz applies to 3D cases only (this case is 2D)")
+    for key in names:
+        if spec[key] < 2:
+            raise CaseError(f"{label}.{key} must be >= 2 for a lattice body, got {spec[key]}")
+    return tuple(spec[key] for key in names)
+
+
+def _lattice(label, spec, dimension):
     for key in GENERAL_ONLY:
         if spec[key]:
             raise CaseError(f"{label}.{key} applies to general bodies only "
                             f"(set type = \"general\")")
-    nx, ny, spacing = spec["nx"], spec["ny"], spec["spacing"]
-    for key, value in (("nx", nx), ("ny", ny)):
-        if value < 2:
-            raise CaseError(f"{label}.{key} must be >= 2 for a lattice body, got {value}")
+    shape, spacing = _lattice_shape(label, spec, dimension), spec["spacing"]
     if not spacing > 0:
         raise CaseError(f"{label}.spacing must be > 0 for a lattice body, got {spacing}")
-    position, springs, shear, boundary = lattice_geometry(nx, ny, spacing, spec["lower"])
+    position, springs, kind, boundary = lattice_geometry(shape, spacing, spec["lower"])
+    shear = kind == FACE_DIAGONAL
     if is_elastic(spec):
         # Springs, masses and dashpots come from the material, in build_body.
-        return position, springs, None, None, boundary, (nx, ny)
+        return position, springs, None, None, boundary, shape
     check_not_elastic(label, spec)
     if spec["node_mass"] > 0 and spec["density"] > 0:
         raise CaseError(f"{label}: give node_mass or density, not both")
     if spec["node_mass"] > 0:
         mass = spec["node_mass"]
     elif spec["density"] > 0:
-        # Per unit depth: each node carries one lattice cell's worth of material.
-        mass = spec["density"] * spacing ** 2
+        # Each node carries one lattice cell's worth of material (2D: per unit depth).
+        mass = spec["density"] * spacing ** dimension
     else:
         raise CaseError(f"{label}: node mass must be > 0: set node_mass [kg] or density "
                         f"[kg/m^3]")
@@ -199,10 +218,13 @@ def _lattice(label, spec):
         raise CaseError(f"{label}: missing key 'stiffness' [N/m] (or give youngs_modulus [Pa])")
     shear_stiffness = spec["shear_stiffness"] or spec["stiffness"]
     stiffness = np.where(shear, shear_stiffness, spec["stiffness"])
-    return position, springs, stiffness, np.full(len(position), mass), boundary, (nx, ny)
+    return position, springs, stiffness, np.full(len(position), mass), boundary, shape
 
 
-def _general(label, spec):
+def _general(label, spec, dimension):
+    if dimension != 2:
+        raise CaseError(f"{label}.type = \"general\" runs in 2D cases only so far (its "
+                        f"boundary is a node loop); in 3D use type = \"lattice\"")
     for key in LATTICE_ONLY:
         if spec[key]:
             raise CaseError(f"{label}.{key} applies to lattice bodies only")
@@ -257,40 +279,45 @@ def _anchored_boundary(label, spec, boundary, shape, n, count):
     return np.concatenate([anchor_ids, row])
 
 
-def build_body(k, spec, gravity, domain=None):
-    """One :class:`Body` from a validated ``[[body]]`` table."""
-    label = _label(k, spec)
-    name = spec["name"] or f"body{k}"
-    builder = _lattice if spec["type"] == "lattice" else _general
-    position, springs, stiffness, mass, boundary, shape = builder(label, spec)
-    damping, axial_damping = spec["damping"], False
-    if shape is not None and is_elastic(spec):
-        stiffness, mass, damping, axial_damping, _ = elastic_lattice(label, spec, shape, springs)
-    n = len(position)
-    anchors = np.asarray(spec["anchors"], dtype=float).reshape(-1, 2)
+def _closed_boundary(label, spec, position, boundary, shape):
+    """(anchors (a, d), the boundary through them, the material's own outline), checked.
+
+    A 2D loop is checked as a simple counter-clockwise polygon; a 3D lattice's
+    surface is outward by construction (lattice.py).
+    """
+    n, d = position.shape
+    anchors = np.asarray(spec["anchors"], dtype=float).reshape(-1, d)
+    if d != 2:
+        if len(anchors):
+            raise CaseError(f"{label}.anchors close a 2D boundary loop; they apply to 2D "
+                            f"cases only")
+        return anchors, boundary, boundary
     outline = boundary[boundary < n]
     if len(anchors):
         boundary = _anchored_boundary(label, spec, boundary, shape, n, len(anchors))
     check_boundary(label, np.concatenate([position, anchors]), boundary)
+    return anchors, boundary, outline
+
+
+def _check_placement(label, position, springs, domain):
+    """Refuse zero-length springs and nodes outside the domain."""
     separation = position[springs[:, 0]] - position[springs[:, 1]]
-    short = np.hypot(separation[:, 0], separation[:, 1]) == 0
+    short = ~np.any(separation != 0.0, axis=1)
     if short.any():
         row = int(np.flatnonzero(short)[0])
         raise CaseError(f"{label}.springs[{row}] has zero rest length: nodes "
                         f"{springs[row, 0]} and {springs[row, 1]} coincide")
     if domain is not None:
         lower, upper = np.asarray(domain["lower"]), np.asarray(domain["upper"])
-        every = np.concatenate([position, anchors])
-        outside = outside_box(every, lower, upper)
+        outside = outside_box(position, lower, upper)
         if outside.any():
-            x, y = every[np.flatnonzero(outside)[0]]
+            at = ", ".join(f"{x:.6g}" for x in position[np.flatnonzero(outside)[0]])
             raise CaseError(f"{label} has {int(outside.sum())} nodes outside the domain, "
-                            f"e.g. at ({x:.6g}, {y:.6g})")
-    pinned = np.zeros(n, bool)
-    if spec["pinned"] != "none":
-        pinned[node_set(f"{label}.pinned", spec["pinned"], position, shape=shape)] = True
-    if spec["pinned_ids"]:
-        pinned[node_set(f"{label}.pinned_ids", "ids", position, ids=spec["pinned_ids"])] = True
+                            f"e.g. at ({at})")
+
+
+def _loads(label, spec, position, shape):
+    """(nodes, force, start, end, ramp) of every [[body.load]], checked."""
     loads = []
     for l, load in enumerate(spec["load"]):
         where = f"{label}.load[{l}]"
@@ -302,26 +329,52 @@ def build_body(k, spec, gravity, domain=None):
         nodes = node_set(where, load["nodes"], position, load["index"], load["ids"], shape)
         loads.append((nodes, np.asarray(load["force"]), load["start"], load["end"],
                       load["ramp"]))
+    return loads
+
+
+def build_body(k, spec, gravity, domain=None):
+    """One :class:`Body` from a validated ``[[body]]`` table; the case's dimension is
+    that of ``gravity``."""
+    label = _label(k, spec)
+    name = spec["name"] or f"body{k}"
+    dimension = len(gravity)
+    builder = _lattice if spec["type"] == "lattice" else _general
+    position, springs, stiffness, mass, boundary, shape = builder(label, spec, dimension)
+    damping, axial_damping = spec["damping"], False
+    if shape is not None and is_elastic(spec):
+        stiffness, mass, damping, axial_damping, _ = elastic_lattice(label, spec, shape, springs)
+    n = len(position)
+    anchors, boundary, outline = _closed_boundary(label, spec, position, boundary, shape)
+    _check_placement(label, np.concatenate([position, anchors]), springs, domain)
+    pinned = np.zeros(n, bool)
+    if spec["pinned"] != "none":
+        pinned[node_set(f"{label}.pinned", spec["pinned"], position, shape=shape)] = True
+    if spec["pinned_ids"]:
+        pinned[node_set(f"{label}.pinned_ids", "ids", position, ids=spec["pinned_ids"])] = True
+    loads = _loads(label, spec, position, shape)
     velocity = np.tile(np.asarray(spec["velocity"], dtype=float), (n, 1))
     if len(anchors):
         # Anchors follow the material nodes: pinned, at rest, without springs.
         a = len(anchors)
         position = np.concatenate([position, anchors])
-        velocity = np.concatenate([velocity, np.zeros((a, 2))])
+        velocity = np.concatenate([velocity, np.zeros((a, dimension))])
         mass = np.concatenate([np.broadcast_to(mass, (n,)), np.full(a, np.mean(mass))])
         pinned = np.concatenate([pinned, np.ones(a, bool)])
     body = Body(name, position, velocity, mass, springs, stiffness, damping, boundary,
                 volume_constraint=spec["volume_constraint"], pinned=pinned,
-                gravity=gravity if spec["gravity"] else (0.0, 0.0), loads=loads,
+                gravity=gravity if spec["gravity"] else np.zeros(dimension), loads=loads,
                 anchors=len(anchors), outline=outline, axial_damping=axial_damping)
-    log.debug("body %s: %d nodes, %d springs, area %.6g, %d pinned, %d loads", name, n,
+    if body.rest_volume <= 0.0:
+        raise CaseError(f"{label}: its boundary encloses no volume ({body.rest_volume:.6g})")
+    log.debug("body %s: %d nodes, %d springs, volume %.6g, %d pinned, %d loads", name, n,
               len(springs), body.rest_volume, int(pinned.sum()), len(loads))
     return body
 
 
 def build_bodies(case):
     """Every ``[[body]]`` of a validated case, as :class:`~parmps.solids.mass_spring.body.Body` objects."""
-    gravity = case.get("physics", {}).get("gravity", (0.0, -9.81))
+    dimension = case.get("dimension", 2)
+    gravity = case.get("physics", {}).get("gravity", [0.0] * (dimension - 1) + [-9.81])
     bodies = [build_body(k, spec, gravity, case.get("domain"))
               for k, spec in enumerate(case.get("body", []))]
     names = [body.name for body in bodies]

@@ -15,39 +15,43 @@ import numpy as np
 @numba.njit(cache=True)
 def network_forces(position, velocity, springs, rest_length, stiffness, damping,
                    axial_damping, force):
-    """Spring and dashpot forces of every spring, added into ``force`` (n, 2).
+    """Spring and dashpot forces of every spring, added into ``force`` (n, d).
 
     Hooke ``-k (|l| - l0) l/|l|`` with l = x_i - x_j (a collapsed spring exerts none);
     dashpots ``-b ((v_i - v_j).e) e`` along e = l/|l| when ``axial_damping``, else
-    ``-b (v_i - v_j)``.
+    ``-b (v_i - v_j)``. Any number of components d; in 2D the arithmetic is the
+    same, operation for operation, as the 2D kernel this replaced.
     """
+    d = position.shape[1]
     for s in range(springs.shape[0]):
         i, j = springs[s, 0], springs[s, 1]
-        dx = position[i, 0] - position[j, 0]
-        dy = position[i, 1] - position[j, 1]
-        length = np.sqrt(dx * dx + dy * dy)
-        fx = 0.0
-        fy = 0.0
+        squared = 0.0
+        for a in range(d):
+            delta = position[i, a] - position[j, a]
+            squared += delta * delta
+        length = np.sqrt(squared)
+        scale = 0.0
         if length > 0.0:
             scale = stiffness[s] * (length - rest_length[s]) / length
-            fx = -scale * dx
-            fy = -scale * dy
         b = damping[s]
-        if b != 0.0:
-            rx = velocity[i, 0] - velocity[j, 0]
-            ry = velocity[i, 1] - velocity[j, 1]
-            if axial_damping:
-                if length > 0.0:
-                    rate = b * (rx * dx + ry * dy) / (length * length)
-                    fx -= rate * dx
-                    fy -= rate * dy
-            else:
-                fx -= b * rx
-                fy -= b * ry
-        force[i, 0] += fx
-        force[i, 1] += fy
-        force[j, 0] -= fx
-        force[j, 1] -= fy
+        # Axial dashpots: the rate of stretch, b (v_i - v_j).l / |l|^2.
+        rate = 0.0
+        if b != 0.0 and axial_damping and length > 0.0:
+            closing = 0.0
+            for a in range(d):
+                closing += ((velocity[i, a] - velocity[j, a])
+                            * (position[i, a] - position[j, a]))
+            rate = b * closing / (length * length)
+        for a in range(d):
+            delta = position[i, a] - position[j, a]
+            f = -scale * delta
+            if b != 0.0:
+                if axial_damping:
+                    f -= rate * delta
+                else:
+                    f -= b * (velocity[i, a] - velocity[j, a])
+            force[i, a] += f
+            force[j, a] -= f
 
 
 @numba.njit(cache=True)
@@ -56,22 +60,20 @@ def held_force_substeps(position, velocity, acceleration, inverse_mass, springs,
     """``count`` velocity-Verlet substeps of length h with the external force held.
 
     The body's own scheme (body.py): v += h/2 a; x += h v; a = M^-1 F(x, v_half); v += h/2 a,
-    in place on ``position``, ``velocity`` and ``acceleration``. For bodies without an area
-    constraint and without time-windowed loads, whose force depends on nothing else.
+    in place on ``position``, ``velocity`` and ``acceleration`` (n, d). For bodies without a
+    volume constraint and without time-windowed loads, whose force depends on nothing else.
     """
-    n = position.shape[0]
-    force = np.empty((n, 2))
+    n, d = position.shape
+    force = np.empty((n, d))
     for _ in range(count):
         for k in range(n):
-            for axis in range(2):
+            for axis in range(d):
                 velocity[k, axis] += 0.5 * h * acceleration[k, axis]
                 position[k, axis] += h * velocity[k, axis]
-        for k in range(n):
-            force[k, 0] = 0.0
-            force[k, 1] = 0.0
+        force[:, :] = 0.0
         network_forces(position, velocity, springs, rest_length, stiffness, damping,
                        axial_damping, force)
         for k in range(n):
-            for axis in range(2):
+            for axis in range(d):
                 acceleration[k, axis] = (force[k, axis] + external[k, axis]) * inverse_mass[k]
                 velocity[k, axis] += 0.5 * h * acceleration[k, axis]
