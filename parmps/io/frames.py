@@ -4,7 +4,8 @@
 attributes ``time``, ``step`` and ``dt``; ``/vertex_index`` is 0, 1, 2, ... as
 long as the largest frame, the particles' vertex connectivity in the XDMF; with bodies, ``/frames/<step>/solids/
 <body>/position`` and ``velocity`` hold every node (anchors included) in the
-body's own order, and ``/solids/<body>/springs`` the mesh once.
+body's own order, ``/solids/<body>/springs`` the mesh once and ``/solids/<body>/surface``
+its boundary facets (m, d) once (2D: the loop's edges; 3D: outward triangles).
 """
 
 import os
@@ -43,14 +44,22 @@ class FrameWriter:
             for k, body in enumerate(solids.bodies):
                 group = root.require_group(body.name)
                 springs = solids.springs(k)
+                surface = solids.surface(k)
                 if "springs" not in group:
-                    dataset = group.create_dataset("springs", shape=springs.shape,
-                                                   dtype=np.int64)
                     for key, value in solids.attributes(k).items():
                         group.attrs[key] = value
-                    if self.comm.rank == 0:
-                        dataset[...] = springs
-                self.bodies.append((body.name, len(body.position), len(springs)))
+                    self._write_once(group, "springs", springs)
+                    if surface is not None:
+                        self._write_once(group, "surface", surface)
+                # A result written before surfaces were stored has none.
+                shape = group["surface"].shape if "surface" in group else (0, 0)
+                self.bodies.append((body.name, len(body.position), len(springs), shape))
+
+    def _write_once(self, group, name, array):
+        """An integer array written once by rank 0 (collective creation)."""
+        dataset = group.create_dataset(name, shape=array.shape, dtype=np.int64)
+        if self.comm.rank == 0:
+            dataset[...] = array
 
     def write(self, step, time, dt, particles):
         """Write the owned particles (and every body's nodes) as /frames/<step>; collective.

@@ -1,8 +1,11 @@
 """The XDMF sidecar of result.h5: what ParaView opens.
 
-Two temporal collections: ``particles``, one point cloud per frame with every
-particle array, and (for a case with bodies) ``springs``, every body's springs
-as 2-node polylines at the same times, so ParaView draws the bodies' meshes.
+Temporal collections: ``particles``, one point cloud per frame with every
+particle array; for a case with bodies ``springs``, every body's springs as
+2-node polylines at the same times, so ParaView draws the bodies' meshes; and
+for bodies whose boundary is triangles (3D) ``surfaces``, those triangles, so
+ParaView draws the surface whose volume the constraint keeps. (A 2D body's
+boundary edges are springs already drawn.)
 The file is rewritten whole after each frame through a temporary file, so a
 run that stops at any moment leaves a sidecar that names only written frames.
 """
@@ -46,20 +49,22 @@ def _particle_grid(h5_name, step, time, total, n_vertex_index, dimension):
       </Grid>"""
 
 
-def _spring_collection(h5_name, frames, bodies, dimension):
-    """Every body's springs as 2-node polylines, one spatial collection per frame.
+def _body_collection(h5_name, frames, bodies, dimension, mesh):
+    """Every body's springs (``mesh`` = "springs": 2-node polylines) or surface triangles
+    (``mesh`` = "surface"), one spatial collection per frame.
 
-    ``bodies``: (name, nodes, springs) per body.
+    ``bodies``: (name, nodes, elements, nodes per element) per body.
     """
     d = dimension
+    topology = {"springs": "Polyline", "surface": "Triangle"}[mesh]
     steps = []
     for step, time, _ in frames:
         grids = []
-        for name, n_nodes, n_springs in bodies:
+        for name, n_nodes, count, width in bodies:
             base = f"{h5_name}:/frames/{step:08d}/solids/{name}"
             grids.append(f"""          <Grid Name="{name}" GridType="Uniform">
-            <Topology TopologyType="Polyline" NumberOfElements="{n_springs}" NodesPerElement="2">
-              <DataItem Dimensions="{n_springs} 2" NumberType="Int" Precision="8" Format="HDF">{h5_name}:/solids/{name}/springs</DataItem>
+            <Topology TopologyType="{topology}" NumberOfElements="{count}" NodesPerElement="{width}">
+              <DataItem Dimensions="{count} {width}" NumberType="Int" Precision="8" Format="HDF">{h5_name}:/solids/{name}/{mesh}</DataItem>
             </Topology>
             <Geometry GeometryType="{GEOMETRY_TYPES[d]}">
               <DataItem Dimensions="{n_nodes} {d}" NumberType="Float" Precision="8" Format="HDF">{base}/position</DataItem>
@@ -68,19 +73,25 @@ def _spring_collection(h5_name, frames, bodies, dimension):
               <DataItem Dimensions="{n_nodes} {d}" NumberType="Float" Precision="8" Format="HDF">{base}/velocity</DataItem>
             </Attribute>
           </Grid>""")
-        steps.append(f"""      <Grid Name="solids step {step}" GridType="Collection" CollectionType="Spatial">
+        steps.append(f"""      <Grid Name="{mesh} step {step}" GridType="Collection" CollectionType="Spatial">
         <Time Value="{time:.10g}"/>
 """ + "\n".join(grids) + """
       </Grid>""")
-    return ("""    <Grid Name="springs" GridType="Collection" CollectionType="Temporal">
+    name = {"springs": "springs", "surface": "surfaces"}[mesh]
+    return (f"""    <Grid Name="{name}" GridType="Collection" CollectionType="Temporal">
 """ + "\n".join(steps) + """
     </Grid>
 """)
 
 
 def write_xdmf(path, h5_name, frames, n_vertex_index, dimension=2, bodies=()):
-    """Write the sidecar for ``frames`` ((step, time, particle count) each) and ``bodies``;
-    ``n_vertex_index``: the length of ``/vertex_index``."""
+    """Write the sidecar for ``frames`` ((step, time, particle count) each) and ``bodies``
+    ((name, nodes, springs, surface shape) each); ``n_vertex_index``: the length of
+    ``/vertex_index``."""
+    springs = [(name, nodes, count, 2) for name, nodes, count, _ in bodies]
+    # Triangles only: a 2D boundary's edges are springs, drawn already.
+    surfaces = [(name, nodes, shape[0], 3) for name, nodes, _, shape in bodies
+                if shape[1:] == (3,)]
     grids = [_particle_grid(h5_name, step, time, total, n_vertex_index, dimension)
              for step, time, total in frames]
     text = ("""<?xml version="1.0" ?>
@@ -90,7 +101,9 @@ def write_xdmf(path, h5_name, frames, n_vertex_index, dimension=2, bodies=()):
     <Grid Name="particles" GridType="Collection" CollectionType="Temporal">
 """ + "\n".join(grids) + """
     </Grid>
-""" + (_spring_collection(h5_name, frames, bodies, dimension) if bodies else "") + """  </Domain>
+""" + (_body_collection(h5_name, frames, springs, dimension, "springs") if springs else "")
+            + (_body_collection(h5_name, frames, surfaces, dimension, "surface")
+               if surfaces else "") + """  </Domain>
 </Xdmf>
 """)
     temporary = path + ".tmp"

@@ -97,6 +97,11 @@ class SolidModel:
         """Body k's connectivity as node index pairs (the mesh ParaView draws)."""
         raise NotImplementedError
 
+    def surface(self, k):
+        """Body k's boundary facets (m, d) as node indices (2D: the loop's edges; 3D:
+        outward triangles, the mesh ParaView draws as its surface), or None."""
+        return None
+
     def attributes(self, k):
         """Constant attributes of body k for the output (e.g. its rest area)."""
         return {}

@@ -152,6 +152,9 @@ class MassSpringModel(SolidModel):
     def springs(self, k):
         return self.bodies[k].springs
 
+    def surface(self, k):
+        return self.bodies[k].facets
+
     def attributes(self, k):
         body = self.bodies[k]
         return {"rest_volume": body.rest_volume, "nodes": body.n_nodes}
