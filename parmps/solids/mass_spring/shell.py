@@ -27,7 +27,9 @@ import math
 
 import numpy as np
 
+from parmps.config import ZERO, Key
 from parmps.errors import CaseError
+from parmps.solids.mass_spring.surface import enclosed_volume
 
 log = logging.getLogger(__name__)
 
@@ -225,12 +227,6 @@ def triangle_areas(vertices, triangles):
     return 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
 
 
-def signed_volume(vertices, triangles):
-    """(1/6) sum (x_a x x_b) . x_c: positive for an outward closed surface."""
-    a, b, c = (vertices[triangles[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->i", np.cross(a, b), c).sum()) / 6.0
-
-
 def edge_lengths(vertices, triangles):
     """Length of each triangle's three sides (shared sides twice); shape (m, 3)."""
     corners = vertices[triangles]
@@ -393,7 +389,7 @@ def check_closed_surface(source, vertices, triangles):
         v = int(np.flatnonzero(pinched)[0])
         raise CaseError(f"{source}: {int(pinched.sum())} non-manifold vertices (where separate "
                         f"parts of the surface touch), e.g. vertex {v} at {_at(vertices, v)}")
-    volume = signed_volume(vertices, triangles)
+    volume = enclosed_volume(vertices, triangles)
     extent = float(np.ptp(vertices, axis=0).max())
     if volume < 0:
         raise CaseError(f"{source}: the triangles are oriented inward (enclosed volume "
@@ -603,10 +599,67 @@ def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
 
 
 # --------------------------------------------------------------------------
-# A shell body's geometry from its [[body]] table
+# A shell body from its [[body]] table
 
 
 SHAPES = ("sphere", "capsule", "red_blood_cell", "file")
+
+# The [[body]] keys of type = "shell" (parmps.solids.settings adds them). A shell
+# also reads spacing (target edge length), stiffness (edge springs), node_mass,
+# damping, pinned, load and volume_constraint.
+KEYS = {
+    "shape": Key("str", "sphere", choices=SHAPES,
+                 doc="shell: a generated sphere, capsule or red_blood_cell (Evans & Fung "
+                     "1972), or a closed triangle mesh file"),
+    "radius": Key("float", 0.0, ge=0.0, doc="shell sphere and capsule: radius [m]"),
+    "length": Key("float", 0.0, ge=0.0,
+                  doc="shell capsule: length of its cylinder [m] (total radius+length+radius)"),
+    "diameter": Key("float", 0.0, ge=0.0,
+                    doc="shell red_blood_cell: diameter [m]; 0 means Evans & Fung's 7.82 um"),
+    "axis": Key("str", "z", choices=("x", "y", "z"),
+                doc="shell capsule and red_blood_cell: the axis of symmetry"),
+    "center": Key("vector", ZERO, doc="shell: centre of a generated shape; added to a mesh "
+                                      "file's coordinates"),
+    "mesh": Key("str", "", doc="shell with shape = \"file\": a closed surface mesh (STL, OBJ, "
+                               "Gmsh .msh, VTK, ... read by meshio; a relative path is from "
+                               "the working directory)"),
+    "refinement": Key("int", 0, ge=0,
+                      doc="shell: geodesic frequency n (each base edge cut n times; 2^k is k "
+                          "midpoint subdivisions) instead of spacing"),
+    "bending_stiffness": Key("float", 0.0, ge=0.0,
+                             doc="shell: spring joining the two vertices opposite each edge "
+                                 "[N/m]; 0: no bending springs"),
+    "surface_density": Key("float", 0.0, ge=0.0,
+                           doc="shell: mass per area [kg/m^2]; a node gets a third of its "
+                               "triangles' area (instead of node_mass)"),
+}
+
+# Keys of the other body types, refused on a shell.
+OTHER_KEYS = {"nx": 0, "ny": 0, "nz": 0, "density": 0.0, "shear_stiffness": 0.0,
+              "youngs_modulus": 0.0, "nodes": [], "springs": [], "boundary": [],
+              "masses": [], "spring_stiffness": [], "anchors": [], "poisson_ratio": None,
+              "damping_ratio": 0.0, "plane": "strain", "thickness": 1.0}
+
+
+def check_keys(label, spec):
+    """Refuse shell keys on another body type, and other types' keys on a shell."""
+    if spec["type"] == "shell":
+        for key, unset in OTHER_KEYS.items():
+            if spec.get(key, unset) != unset:
+                raise CaseError(f"{label}.{key} does not apply to a shell body")
+        return
+    for key, value in KEYS.items():
+        if key in spec and spec[key] != (value.default(len(spec["center"]))
+                                         if callable(value.default) else value.default):
+            raise CaseError(f"{label}.{key} applies to shell bodies only (type = \"shell\")")
+
+
+def _oriented(mesh, axis, center):
+    """A mesh made along z turned to ``axis`` by a cyclic permutation (a rotation,
+    so the triangles stay outward), then moved to ``center``."""
+    vertices, triangles = mesh
+    turn = {"z": [0, 1, 2], "x": [2, 0, 1], "y": [1, 2, 0]}[axis]
+    return vertices[:, turn] + np.asarray(center, dtype=float), triangles
 
 
 def shell_mesh(label, spec):
@@ -614,27 +667,59 @@ def shell_mesh(label, spec):
     the body in messages."""
     shape, h = spec["shape"], spec["spacing"] or None
     frequency = spec["refinement"] or None
-    center = spec["center"]
-    if shape == "sphere":
-        _need(label, spec, "radius")
-        mesh = icosphere(spec["radius"], frequency, h, center)
-    elif shape == "capsule":
-        _need(label, spec, "radius")
-        mesh = capsule(spec["radius"], spec["length"], h, frequency, center)
-    elif shape == "red_blood_cell":
-        mesh = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency, center)
-    else:
+    if shape == "file":
         if not spec["mesh"]:
             raise CaseError(f"{label}: shape = \"file\" needs mesh = \"path\" (STL, OBJ, "
                             f"Gmsh .msh, VTK, ...)")
-        vertices, triangles = read_mesh(spec["mesh"], f"{label}.mesh '{spec['mesh']}'")
-        mesh = (vertices + np.asarray(center, dtype=float), triangles)
-    source = (f"{label}.mesh '{spec['mesh']}'" if shape == "file"
-              else f"{label} ({shape} generator)")
+        source = f"{label}.mesh '{spec['mesh']}'"
+        vertices, triangles = read_mesh(spec["mesh"], source)
+        mesh = (vertices + np.asarray(spec["center"], dtype=float), triangles)
+    else:
+        if spec["mesh"]:
+            raise CaseError(f"{label}.mesh needs shape = \"file\" (shape is \"{shape}\")")
+        if shape in ("sphere", "capsule") and not spec["radius"] > 0:
+            raise CaseError(f"{label}.radius must be > 0 for shape = \"{shape}\"")
+        if shape == "sphere":
+            made = icosphere(spec["radius"], frequency, h)
+        elif shape == "capsule":
+            made = capsule(spec["radius"], spec["length"], h, frequency)
+        else:
+            made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+        mesh = _oriented(made, spec["axis"], spec["center"])
+        source = f"{label} ({shape} generator)"
     check_closed_surface(source, *mesh)
     return mesh
 
 
-def _need(label, spec, key):
-    if not spec[key] > 0:
-        raise CaseError(f"{label}.{key} must be > 0 for shape = \"{spec['shape']}\"")
+def shell_body(label, spec, dimension):
+    """What build.py needs of a shell: (position, springs, stiffness, mass, facets, None).
+
+    Springs: every edge (``stiffness``), then, with ``bending_stiffness``, one across
+    every edge between the vertices opposite it. The facets are the triangles.
+    """
+    if dimension != 3:
+        raise CaseError(f"{label}.type = \"shell\" is a closed surface in 3D; this case is "
+                        f"{dimension}D")
+    check_keys(label, spec)
+    vertices, triangles = shell_mesh(label, spec)
+    edges, bending = edges_and_bending(triangles)
+    if spec["stiffness"] is None:
+        raise CaseError(f"{label}: missing key 'stiffness' [N/m] (the edge springs)")
+    springs, stiffness = edges, np.full(len(edges), spec["stiffness"])
+    if spec["bending_stiffness"] > 0:
+        springs = np.concatenate([edges, bending])
+        stiffness = np.concatenate([stiffness, np.full(len(bending),
+                                                       spec["bending_stiffness"])])
+    if spec["node_mass"] > 0 and spec["surface_density"] > 0:
+        raise CaseError(f"{label}: give node_mass or surface_density, not both")
+    if spec["node_mass"] > 0:
+        mass = np.full(len(vertices), spec["node_mass"])
+    elif spec["surface_density"] > 0:
+        mass = spec["surface_density"] * node_areas(vertices, triangles)
+    else:
+        raise CaseError(f"{label}: node mass must be > 0: set node_mass [kg] or "
+                        f"surface_density [kg/m^2]")
+    log.debug("%s: %d nodes, %d triangles, %d springs (%d bending), volume %.6g", label,
+             len(vertices), len(triangles), len(springs), len(springs) - len(edges),
+             enclosed_volume(vertices, triangles))
+    return vertices, springs, stiffness, mass, triangles, None
