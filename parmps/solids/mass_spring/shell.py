@@ -18,7 +18,7 @@ arrays out, no Python loop over triangles.
   exists).
 
 Geodesic spheres: every face of a base polyhedron (icosahedron or octahedron) is
-cut into ``frequency``^2 triangles on a barycentric grid and the grid points are
+cut into frequency^2 triangles on a barycentric grid and the grid points are
 projected on the sphere. Frequency 2^k is k levels of midpoint subdivision.
 """
 
