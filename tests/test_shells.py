@@ -390,6 +390,29 @@ def test_a_capsule_along_x_puts_a_line_of_nodes_on_top():
     assert top.sum() == 9 and body.pinned.sum() == 9
 
 
+def test_a_red_blood_cell_body_turned_to_y():
+    body = build('type = "shell"\nshape = "red_blood_cell"\naxis = "y"\nrefinement = 8\n'
+                 'center = [0.1, 0.2, 0.3]\nstiffness = 1e-6\nsurface_density = 1e-3')
+    extent = np.ptp(body.position, axis=0)
+    assert extent[[0, 2]] == pytest.approx([shell.RBC_DIAMETER] * 2)
+    assert extent[1] == pytest.approx(2 * shell.rbc_half_thickness(
+        np.linspace(0, shell.RBC_DIAMETER / 2, 100001)).max(), rel=1e-3)
+    assert body.position.mean(axis=0) == pytest.approx([0.1, 0.2, 0.3])
+    assert body.rest_volume == pytest.approx(evans_fung_volume(shell.RBC_DIAMETER), rel=3e-2)
+
+
+def test_a_mesh_file_body_is_read_and_moved(tmp_path):
+    vertices, triangles = shell.capsule(0.1, 0.2, frequency=4)
+    path = tmp_path / "capsule.obj"
+    meshio.write(path, meshio.Mesh(vertices, [("triangle", triangles)]))
+    body = build(f'type = "shell"\nshape = "file"\nmesh = "{path}"\ncenter = [0.5, 0, 0]\n'
+                 f'stiffness = 5.0\nnode_mass = 0.01\nvolume_constraint = false')
+    assert body.n_nodes == len(vertices) and len(body.facets) == len(triangles)
+    assert body.position.mean(axis=0) == pytest.approx([0.5, 0.0, 0.0])
+    assert body.rest_volume == pytest.approx(enclosed_volume(vertices, triangles))
+    assert not body.volume_constraint and len(body.springs) == 3 * len(triangles) // 2
+
+
 @pytest.mark.parametrize("body, dimension, match", [
     ('type = "shell"\nradius = 0.5\nstiffness = 1.0\nnode_mass = 1.0', 2,
      "shell.* is a closed surface in 3D; this case is 2D"),
