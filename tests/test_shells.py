@@ -337,21 +337,53 @@ def test_capsule_fill_matches_the_capsule_and_its_volume(spacing):
     check_count(vertices, triangles, spacing, exact, radius)
 
 
-def test_fill_agrees_with_the_winding_number():
-    vertices, triangles = shell.red_blood_cell(8.0, frequency=8, center=(0.05, 0.0, 0.0))
-    spacing = 0.25
+@pytest.mark.parametrize("make, spacing", [
+    (lambda: shell.capsule(0.5, 1.0, frequency=8), 0.125),
+    (lambda: shell.red_blood_cell(8.0, frequency=8), 0.25),
+])
+def test_fill_points_inside_and_the_winding_number_agree(make, spacing):
+    vertices, triangles = make()
+    # A lattice through the origin: its columns run through the poles and the
+    # capsule's vertical edges, and some of its points lie on the surface.
     points = shell.fill_inside(vertices, triangles, spacing)
-    axes = [np.arange(-20, 21) * spacing] * 2 + [np.arange(-8, 9) * spacing]
+    axes = [np.arange(math.floor(a / spacing) - 1, math.ceil(b / spacing) + 2) * spacing
+            for a, b in zip(vertices.min(axis=0), vertices.max(axis=0))]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    inside = shell.points_inside(grid, vertices, triangles)
+    # The same rays: the same answer, points on the surface included.
+    assert np.array_equal(np.sort(np.round(points / spacing).astype(int), axis=0),
+                          np.sort(np.round(grid[inside] / spacing).astype(int), axis=0))
     winding = shell.winding_number(grid, vertices, triangles)
-    # Away from the surface the winding number is 0 or 1 to rounding.
+    # Off the surface the winding number is 0 or 1 to rounding; on it, about 1/2.
     clear = np.abs(winding - np.round(winding)) < 0.4
-    filled = {tuple(k) for k in np.round(points / spacing).astype(int).tolist()}
-    inside = np.array([tuple(k) in filled for k in np.round(grid / spacing).astype(int)
-                       .tolist()])
-    assert clear.sum() > 0.99 * len(grid)
+    assert clear.sum() > 0.98 * len(grid) and 0 < inside.sum() < len(grid)
     assert np.array_equal(inside[clear], np.round(winding[clear]) == 1)
-    assert 0 < inside.sum() < len(grid)
+
+
+def test_points_inside_random_points_against_the_winding_number():
+    vertices, triangles = shell.red_blood_cell(8.0, frequency=12, center=(0.3, -0.2, 0.1))
+    rng = np.random.default_rng(3)
+    lower, upper = vertices.min(axis=0) - 0.5, vertices.max(axis=0) + 0.5
+    points = rng.uniform(lower, upper, size=(4000, 3))
+    inside = shell.points_inside(points, vertices, triangles)
+    winding = shell.winding_number(points, vertices, triangles)
+    assert np.all(np.abs(winding - np.round(winding)) < 1e-6)
+    assert np.array_equal(inside, np.round(winding) == 1)
+    assert 0.1 < inside.mean() < 0.9
+
+
+def test_the_winding_number_on_the_surface_is_the_share_of_directions_inside():
+    # A unit cube of triangles: a point exactly in a face's plane sees that face
+    # edge-on (counted 0, the mean of its two one-sided limits): 1/2 at a face's
+    # centre, 1/4 at an edge's midpoint (a right dihedral angle), 1/8 at a corner.
+    cube = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    quads = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3],
+                      [0, 4, 6, 2], [1, 3, 7, 5]])
+    triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    points = np.array([[0.5, 0.5, 1.0], [0.5, 0.0, 0.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5],
+                       [0.5, 0.5, 1.5]])
+    assert shell.winding_number(points, cube, triangles) == pytest.approx(
+        [0.5, 0.25, 0.125, 1.0, 0.0], abs=1e-12)
 
 
 # ---------------------------------------------------------------------------

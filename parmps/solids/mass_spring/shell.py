@@ -507,18 +507,12 @@ def winding_number(points, vertices, triangles, chunk=200_000):
         det = np.einsum("...i,...i", a, np.cross(b, c))
         den = (la * lb * lc + np.einsum("...i,...i", a, b) * lc
                + np.einsum("...i,...i", b, c) * la + np.einsum("...i,...i", c, a) * lb)
-        out[begin:begin + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+        # A point in a triangle's plane sees it edge-on: its solid angle jumps from
+        # +2 pi to -2 pi across the triangle; take the mean of the two, 0 (not the
+        # +2 pi atan2 gives), so a point on the surface has winding number 1/2.
+        angle = np.where(det == 0.0, 0.0, np.arctan2(det, den))
+        out[begin:begin + step] = angle.sum(axis=1) / (2.0 * np.pi)
     return out
-
-
-def points_inside(points, vertices, triangles):
-    """Whether each point lies inside the closed outward surface; shape (k,)."""
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    inside = np.zeros(len(points), bool)
-    lower, upper = vertices.min(axis=0), vertices.max(axis=0)
-    box = np.all((points >= lower) & (points <= upper), axis=1)
-    inside[box] = winding_number(points[box], vertices, triangles) > 0.5
-    return inside
 
 
 def _edge_side(p, low, high):
@@ -534,6 +528,35 @@ def _edge_side(p, low, high):
     return e, np.where(side == 0, np.sign(tie_y), side)
 
 
+def _crossings(xy, triangle, vertices, triangles):
+    """Where vertical lines through ``xy`` (k, 2) cross ``triangle`` (k,) (indices
+    into ``triangles``): (hit (k,), height of each hit, the sign of each hit's
+    normal z: +1 where the line leaves an outward surface going up)."""
+    tri = triangles[triangle]
+    sides, values = [], []
+    for k in range(3):  # the triangle's three sides a->b, b->c, c->a
+        a, b = tri[:, k], tri[:, (k + 1) % 3]
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        e, side = _edge_side(xy, vertices[lo, :2], vertices[hi, :2])
+        flip = np.where(a == lo, 1.0, -1.0)
+        sides.append(flip * side)
+        values.append(flip * e)
+    a, b, c = (vertices[tri[:, k]] for k in range(3))
+    normal_z = np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                       - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    hit = (normal_z != 0) & np.all(np.array(sides) == normal_z, axis=0)
+    # Barycentric height of the crossing: the side opposite a corner weighs it.
+    e_ab, e_bc, e_ca = (v[hit] for v in values)
+    z = (e_bc * a[hit, 2] + e_ca * b[hit, 2] + e_ab * c[hit, 2]) / (e_ab + e_bc + e_ca)
+    return hit, z, normal_z[hit]
+
+
+def _ragged(count):
+    """(owner, local index) of every item when owner k has count[k] items."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+
+
 def _column_pairs(vertices, triangles, origin, spacing, low, shape):
     """(triangle, column i, column j) for every lattice column within a triangle's
     xy bounding box, expanded without a loop."""
@@ -542,9 +565,7 @@ def _column_pairs(vertices, triangles, origin, spacing, low, shape):
     last = np.minimum(np.floor(corners.max(axis=1)).astype(np.int64) - low[:2],
                       np.array(shape[:2]) - 1)
     span = np.maximum(last - first + 1, 0)
-    count = span[:, 0] * span[:, 1]
-    triangle = np.repeat(np.arange(len(triangles)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    triangle, local = _ragged(span[:, 0] * span[:, 1])
     width = span[triangle, 1]
     i = first[triangle, 0] + local // np.maximum(width, 1)
     j = first[triangle, 1] + local % np.maximum(width, 1)
@@ -570,32 +591,55 @@ def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
         return np.empty((0, 3))
     triangle, i, j = _column_pairs(vertices, triangles, origin, spacing, low, shape)
     column = origin[:2] + spacing * np.column_stack([i + low[0], j + low[1]])
-    tri = triangles[triangle]
-    sides, values = [], []
-    for k in range(3):  # the triangle's three sides a->b, b->c, c->a
-        a, b = tri[:, k], tri[:, (k + 1) % 3]
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        e, side = _edge_side(column, vertices[lo, :2], vertices[hi, :2])
-        flip = np.where(a == lo, 1.0, -1.0)
-        sides.append(flip * side)
-        values.append(flip * e)
-    a, b, c = (vertices[tri[:, k]] for k in range(3))
-    normal_z = np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                       - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    hit = (normal_z != 0) & np.all(np.array(sides) == normal_z, axis=0)
-    # Barycentric height of the crossing: the side opposite a corner weighs it.
-    e_ab, e_bc, e_ca = (v[hit] for v in values)
-    z = (e_bc * a[hit, 2] + e_ca * b[hit, 2] + e_ab * c[hit, 2]) / (e_ab + e_bc + e_ca)
+    hit, z, sign = _crossings(column, triangle, vertices, triangles)
     # Lattice levels strictly below the crossing: 0 .. below - 1.
     below = np.clip(np.ceil((z - origin[2]) / spacing - low[2]).astype(np.int64), 0, shape[2])
     flat = (i[hit] * shape[1] + j[hit]) * (shape[2] + 1) + below
-    jumps = np.bincount(flat, weights=normal_z[hit],
+    jumps = np.bincount(flat, weights=sign,
                         minlength=shape[0] * shape[1] * (shape[2] + 1))
     jumps = jumps.reshape(shape[0], shape[1], shape[2] + 1)
     # Winding number of level k: the crossings with below > k.
     winding = np.cumsum(jumps[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
     inside = np.argwhere(winding > 0.5)
     return origin + spacing * (inside + low)
+
+
+def points_inside(points, vertices, triangles):
+    """Whether each point (k, 3) lies inside the closed outward surface; shape (k,).
+
+    The ray test of :func:`fill_inside` for arbitrary points: triangles are binned
+    by their xy bounding box on a grid of about the median edge, each point is
+    tested against the triangles of its bin only, and the signs of the crossings
+    above it add up to its winding number. Points on the surface fall either side.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    inside = np.zeros(len(points), bool)
+    lower, upper = vertices.min(axis=0), vertices.max(axis=0)
+    candidates = np.flatnonzero(np.all((points >= lower) & (points <= upper), axis=1))
+    if not len(candidates) or not len(triangles):
+        return inside
+    size = float(np.median(edge_lengths(vertices, triangles)))
+    bins = np.maximum(np.ceil((upper[:2] - lower[:2]) / size).astype(np.int64), 1)
+    corners = (vertices[triangles][:, :, :2] - lower[:2]) / size
+    first = np.clip(np.floor(corners.min(axis=1)).astype(np.int64), 0, bins - 1)
+    last = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, bins - 1)
+    span = last - first + 1
+    triangle, local = _ragged(span[:, 0] * span[:, 1])
+    cell = ((first[triangle, 0] + local // span[triangle, 1]) * bins[1]
+            + first[triangle, 1] + local % span[triangle, 1])
+    order = np.argsort(cell, kind="stable")
+    triangle, per_cell = triangle[order], np.bincount(cell, minlength=bins.prod())
+    start = np.cumsum(per_cell) - per_cell
+    p = points[candidates]
+    where = np.clip(np.floor((p[:, :2] - lower[:2]) / size).astype(np.int64), 0, bins - 1)
+    own = where[:, 0] * bins[1] + where[:, 1]
+    point, local = _ragged(per_cell[own])
+    pairs = triangle[start[own[point]] + local]
+    hit, z, sign = _crossings(p[point, :2], pairs, vertices, triangles)
+    above = z > p[point[hit], 2]
+    winding = np.bincount(point[hit][above], weights=sign[above], minlength=len(p))
+    inside[candidates] = winding > 0.5
+    return inside
 
 
 # --------------------------------------------------------------------------
