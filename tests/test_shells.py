@@ -458,6 +458,16 @@ def test_a_mesh_file_body_is_read_and_moved(tmp_path):
      'nx = 3', 3, r"body\[0\].nx does not apply to a shell"),
     ('nx = 2\nny = 2\nnz = 2\nspacing = 0.1\nstiffness = 1.0\nnode_mass = 1.0\n'
      'radius = 0.5', 3, r'body\[0\].radius applies to shell bodies only'),
+    ('type = "shell"\nshape = "red_blood_cell"\nradius = 0.5\nstiffness = 1.0\n'
+     'node_mass = 1.0', 3, r'\.radius does not apply to shape = "red_blood_cell" \(it reads '
+     r'diameter, axis, spacing, refinement and center\)'),
+    ('type = "shell"\nradius = 0.5\nspacing = 0.1\nrefinement = 3\nstiffness = 1.0\n'
+     'node_mass = 1.0', 3, "give spacing .* or refinement, not both"),
+    ('type = "shell"\nshape = "capsule"\nradius = 0.5\nlength = 1.0\nspacing = 1e-4\n'
+     'stiffness = 1.0\nnode_mass = 1.0', 3,
+     r"body\[0\]: capsule: refinement 7854 makes 1.12e\+09 triangles .more than 2e\+06.; "
+     r"check the "
+     r"units of spacing"),
 ])
 def test_bad_shell_bodies_are_refused_in_one_line(body, dimension, match):
     with pytest.raises(CaseError, match=match):

@@ -47,6 +47,11 @@ MERGE_TOLERANCE = 1e-5
 # A triangle with less than this share of the median edge squared has no area.
 DEGENERATE_AREA = 1e-10
 
+# A generated shell larger than this is a unit mistake (spacing in mm for a body in
+# m), not a body: a mass-spring body of a case has thousands of nodes, and this many
+# triangles already take gigabytes to build.
+MAX_TRIANGLES = 2_000_000
+
 
 def _icosahedron():
     t = (1.0 + math.sqrt(5.0)) / 2.0
@@ -111,15 +116,21 @@ def geodesic(base_vertices, base_faces, frequency):
     return vertices, triangles.reshape(-1, 3)
 
 
-def _frequency(arc, edge_length, frequency, what):
-    """The geodesic frequency: given, or the least whose base-edge arc / n <= edge_length."""
+def _frequency(arc, edge_length, frequency, what, faces, extra=0):
+    """The geodesic frequency: given, or the least whose base-edge arc / n <= edge_length;
+    refused if ``faces`` n^2 + ``extra`` triangles would exceed MAX_TRIANGLES."""
     if frequency is not None:
         if int(frequency) < 1:
             raise CaseError(f"{what}: refinement must be >= 1, got {frequency}")
-        return int(frequency)
-    if edge_length is None or not edge_length > 0:
+        n = int(frequency)
+    elif edge_length is None or not edge_length > 0:
         raise CaseError(f"{what}: give a target edge length > 0 or a refinement")
-    return max(1, math.ceil(arc / edge_length * (1.0 - 1e-12)))
+    else:
+        n = max(1, math.ceil(arc / edge_length * (1.0 - 1e-12)))
+    if faces * n * n + extra > MAX_TRIANGLES:
+        raise CaseError(f"{what}: refinement {n} makes {faces * n * n + extra:.3g} triangles "
+                        f"(more than {MAX_TRIANGLES:.0e}); check the units of spacing")
+    return n
 
 
 def icosphere(radius, frequency=None, edge_length=None, center=(0.0, 0.0, 0.0)):
@@ -129,7 +140,7 @@ def icosphere(radius, frequency=None, edge_length=None, center=(0.0, 0.0, 0.0)):
     icosahedron's edge spans an arc of arccos(1/sqrt5) radians).
     """
     n = _frequency(radius * math.acos(1.0 / math.sqrt(5.0)), edge_length, frequency,
-                   "sphere")
+                   "sphere", 20)
     vertices, triangles = geodesic(*_icosahedron(), n)
     return radius * vertices + np.asarray(center, dtype=float), triangles
 
@@ -160,7 +171,9 @@ def capsule(radius, length, edge_length=None, frequency=None, center=(0.0, 0.0, 
     """
     if not radius > 0 or length < 0:
         raise CaseError(f"capsule: radius must be > 0 and length >= 0, got {radius}, {length}")
-    n = _frequency(radius * math.pi / 2.0, edge_length, frequency, "capsule")
+    n = _frequency(radius * math.pi / 2.0, edge_length, frequency, "capsule", 8,
+                   extra=2 * (length / edge_length) * (2 * math.pi * radius / edge_length)
+                   if edge_length else 0)
     unit, triangles = geodesic(*_octahedron(), n)
     vertices = radius * unit
     equator = _ring_order(vertices, np.flatnonzero(unit[:, 2] == 0.0))
@@ -204,7 +217,7 @@ def red_blood_cell(diameter=RBC_DIAMETER, edge_length=None, frequency=None,
     """
     if not diameter > 0:
         raise CaseError(f"red_blood_cell: diameter must be > 0, got {diameter}")
-    n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell")
+    n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell", 8)
     unit, triangles = geodesic(*_octahedron(), n)
     rho2 = unit[:, 0] ** 2 + unit[:, 1] ** 2
     c0, c1, c2 = coefficients
@@ -706,9 +719,29 @@ def _oriented(mesh, axis, center):
     return vertices[:, turn] + np.asarray(center, dtype=float), triangles
 
 
+# The keys each shape reads, beside center; the others must keep their defaults.
+SHAPE_KEYS = {"sphere": ("radius", "spacing", "refinement"),
+              "capsule": ("radius", "length", "axis", "spacing", "refinement"),
+              "red_blood_cell": ("diameter", "axis", "spacing", "refinement"),
+              "file": ("mesh",)}
+UNSET = {"radius": 0.0, "length": 0.0, "diameter": 0.0, "axis": "z", "mesh": "",
+         "spacing": 0.0, "refinement": 0}
+
+
+def _check_shape_keys(label, spec):
+    shape = spec["shape"]
+    for key, unset in UNSET.items():
+        if spec[key] != unset and key not in SHAPE_KEYS[shape]:
+            raise CaseError(f"{label}.{key} does not apply to shape = \"{shape}\" (it reads "
+                            f"{', '.join(SHAPE_KEYS[shape])} and center)")
+    if spec["spacing"] and spec["refinement"]:
+        raise CaseError(f"{label}: give spacing (a target edge length) or refinement, not both")
+
+
 def shell_mesh(label, spec):
     """(vertices, triangles) of a ``type = "shell"`` body, checked; ``label`` names
     the body in messages."""
+    _check_shape_keys(label, spec)
     shape, h = spec["shape"], spec["spacing"] or None
     frequency = spec["refinement"] or None
     if shape == "file":
@@ -719,16 +752,17 @@ def shell_mesh(label, spec):
         vertices, triangles = read_mesh(spec["mesh"], source)
         mesh = (vertices + np.asarray(spec["center"], dtype=float), triangles)
     else:
-        if spec["mesh"]:
-            raise CaseError(f"{label}.mesh needs shape = \"file\" (shape is \"{shape}\")")
         if shape in ("sphere", "capsule") and not spec["radius"] > 0:
             raise CaseError(f"{label}.radius must be > 0 for shape = \"{shape}\"")
-        if shape == "sphere":
-            made = icosphere(spec["radius"], frequency, h)
-        elif shape == "capsule":
-            made = capsule(spec["radius"], spec["length"], h, frequency)
-        else:
-            made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+        try:
+            if shape == "sphere":
+                made = icosphere(spec["radius"], frequency, h)
+            elif shape == "capsule":
+                made = capsule(spec["radius"], spec["length"], h, frequency)
+            else:
+                made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+        except CaseError as exc:  # the generators name themselves, not the body
+            raise CaseError(f"{label}: {exc}") from None
         mesh = _oriented(made, spec["axis"], spec["center"])
         source = f"{label} ({shape} generator)"
     check_closed_surface(source, *mesh)
