@@ -215,6 +215,25 @@ def test_a_degenerate_triangle_is_refused():
     refused(vertices, triangles, "1 degenerate triangles .zero area., e.g. triangle 5")
 
 
+def test_two_separate_surfaces_are_refused():
+    first, triangles = tetrahedron()
+    second = first + (3.0, 0.0, 0.0)
+    refused(np.concatenate([first, second]), np.concatenate([triangles, triangles + 4]),
+            r"the mesh is 2 separate closed surfaces \(those of vertices 0, 4\); a shell "
+            r"body is one surface")
+
+
+def test_surface_parts_label_each_part_by_its_least_vertex():
+    vertices, triangles = shell.icosphere(1.0, 6)
+    assert np.all(shell.surface_parts(triangles, len(vertices)) == 0)
+    n = len(vertices)
+    # Three spheres, the middle one's vertices listed in reverse.
+    relabel = np.arange(n)[::-1] + n
+    both = np.concatenate([triangles, relabel[triangles], triangles + 2 * n])
+    parts = shell.surface_parts(both, 3 * n)
+    assert np.array_equal(parts, np.repeat([0, n, 2 * n], n))
+
+
 def test_an_unused_vertex_is_refused():
     vertices, triangles = tetrahedron()
     refused(np.concatenate([vertices, [[5.0, 5.0, 5.0]]]), triangles,

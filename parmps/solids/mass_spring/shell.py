@@ -321,6 +321,21 @@ def _vertex_fans(triangles, n_vertices):
     return np.bincount(pairs[:, 0], minlength=n_vertices)
 
 
+def surface_parts(triangles, n_vertices):
+    """Which connected part of the mesh every vertex is on: the least vertex index of
+    its part. Labels spread along the edges, each pass also jumping to the label's
+    own label, until nothing changes."""
+    start, end, _ = _half_edges(np.asarray(triangles))
+    label = np.arange(n_vertices)
+    while True:
+        spread = label.copy()
+        np.minimum.at(spread, start, label[end])
+        spread = spread[spread]
+        if np.array_equal(spread, label):
+            return label
+        label = spread
+
+
 # --------------------------------------------------------------------------
 # Checks
 
@@ -402,6 +417,13 @@ def check_closed_surface(source, vertices, triangles):
         v = int(np.flatnonzero(pinched)[0])
         raise CaseError(f"{source}: {int(pinched.sum())} non-manifold vertices (where separate "
                         f"parts of the surface touch), e.g. vertex {v} at {_at(vertices, v)}")
+    parts = np.unique(surface_parts(triangles, len(vertices)))
+    if len(parts) > 1:
+        # One multiplier for several surfaces would let volume pass between them.
+        raise CaseError(f"{source}: the mesh is {len(parts)} separate closed surfaces (those "
+                        f"of vertices {', '.join(map(str, parts[:3]))}"
+                        f"{', ...' if len(parts) > 3 else ''}); a shell body is one surface: "
+                        f"give each its own [[body]]")
     volume = enclosed_volume(vertices, triangles)
     extent = float(np.ptp(vertices, axis=0).max())
     if volume < 0:
