@@ -274,6 +274,17 @@ def test_corners_that_differ_by_rounding_are_merged(tmp_path):
     assert volume == pytest.approx(enclosed_volume(vertices, triangles), rel=1e-9)
 
 
+def test_a_gmsh_file_keeps_its_triangles_and_skips_its_curves_and_points(tmp_path):
+    vertices, triangles = shell.icosphere(1.0, 3)
+    path = tmp_path / "sphere.msh"
+    cells = [("vertex", np.array([[0]])), ("line", triangles[:5, :2]), ("triangle", triangles)]
+    meshio.write(path, meshio.Mesh(vertices, cells), file_format="gmsh22")
+    read_vertices, read_triangles = shell.read_mesh(path)
+    assert len(read_vertices) == len(vertices) and len(read_triangles) == len(triangles)
+    assert shell.check_closed_surface("msh", read_vertices, read_triangles) == pytest.approx(
+        enclosed_volume(vertices, triangles))
+
+
 def test_quads_are_split_and_other_cells_refused(tmp_path):
     cube = np.array([[x, y, z] for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
     quads = np.array([[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3],
