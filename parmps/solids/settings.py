@@ -5,6 +5,7 @@ import math
 from parmps.config import ZERO, Key, Section
 from parmps.core.settings import PARTICLE_SECTIONS
 from parmps.errors import CaseError
+from parmps.solids.mass_spring.shell import KEYS as SHELL_KEYS
 
 # The sides of a body a node set may name: x, y (3D only) and the last axis.
 SIDES = ("left", "right", "front", "back", "bottom", "top")
@@ -30,13 +31,15 @@ SECTIONS = {
     }, doc="mass-spring solver settings shared by every body"),
     "body": Section({
         "name": Key("str", "", doc="used in the output; default body<k>"),
-        "type": Key("str", "lattice", choices=("lattice", "general"),
+        "type": Key("str", "lattice", choices=("lattice", "general", "shell"),
                     doc="\"lattice\": nx by ny (by nz) nodes with springs generated; "
-                        "\"general\" (2D): nodes, springs and boundary loop given"),
+                        "\"general\" (2D): nodes, springs and boundary loop given; "
+                        "\"shell\" (3D): a closed triangle mesh (docs/shells.md)"),
         "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
         "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
         "nz": Key("int", 0, ge=0, doc="3D lattice: nodes along z"),
-        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
+        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]; shell: target "
+                                                 "edge length [m]"),
         "lower": Key("vector", ZERO, doc="lattice: position of the node with the smallest "
                                          "coordinates"),
         "nodes": Key("points", [], doc="general: node positions [[x, y], ...]"),
@@ -101,6 +104,7 @@ SECTIONS = {
             "end": Key("float", math.inf, gt=0.0, doc="[s]; default: never ends"),
             "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
         }, doc="[[body.load]]: a force on a node set over a time window"),
+        **SHELL_KEYS,
     }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
 }
 

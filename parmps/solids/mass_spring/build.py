@@ -31,6 +31,7 @@ from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
 from parmps.solids.mass_spring.lattice import FACE_DIAGONAL, lattice_geometry  # noqa: F401
+from parmps.solids.mass_spring.shell import check_keys as check_shell_keys, shell_body
 
 log = logging.getLogger(__name__)
 
@@ -338,7 +339,9 @@ def build_body(k, spec, gravity, domain=None):
     label = _label(k, spec)
     name = spec["name"] or f"body{k}"
     dimension = len(gravity)
-    builder = _lattice if spec["type"] == "lattice" else _general
+    builder = {"lattice": _lattice, "general": _general, "shell": shell_body}[spec["type"]]
+    if spec["type"] != "shell":
+        check_shell_keys(label, spec)
     position, springs, stiffness, mass, boundary, shape = builder(label, spec, dimension)
     damping, axial_damping = spec["damping"], False
     if shape is not None and is_elastic(spec):
