@@ -97,30 +97,27 @@ def facet_volume(x, facets, permutations, signs, gradient, with_gradient):
     if with_gradient:
         gradient[:, :] = 0.0
     corner = np.empty((d, d))
-    cofactor = np.empty((d, d))
+    factor = np.empty(d)
+    before = np.empty(d + 1)
     total = 0.0
     for f in range(facets.shape[0]):
         for r in range(d):
             for a in range(d):
                 corner[r, a] = x[facets[f, r], a] - apex[a]
-        cofactor[:, :] = 0.0
         for p in range(permutations.shape[0]):
-            term = signs[p]
+            # before[r]: the sign times the factors of rows 0..r-1.
+            before[0] = signs[p]
             for r in range(d):
-                term *= corner[r, permutations[p, r]]
-            total += term
+                factor[r] = corner[r, permutations[p, r]]
+                before[r + 1] = before[r] * factor[r]
+            total += before[d]
             if with_gradient:
-                # The cofactor of row r: the term without its factor from row r.
-                for r in range(d):
-                    rest = signs[p]
-                    for q in range(d):
-                        if q != r:
-                            rest *= corner[q, permutations[p, q]]
-                    cofactor[r, permutations[p, r]] += rest
-        if with_gradient:
-            for r in range(d):
-                for a in range(d):
-                    gradient[facets[f, r], a] += cofactor[r, a]
+                # The cofactor of row r: the term without its factor from row r,
+                # the factors before r times those after it.
+                after = 1.0
+                for r in range(d - 1, -1, -1):
+                    gradient[facets[f, r], permutations[p, r]] += before[r] * after
+                    after *= factor[r]
     return total
 
 
