@@ -220,7 +220,9 @@ class Result:
     - ``diagnostics``: one row per step (``step``, ``time``, ``dt``, ``ksp_iterations``, ...);
     - ``probes``, ``bodies``, ``checks``: by name, each a :class:`Group` of series
       (a probe's ``time`` and ``value``; a body's ``time``, ``volume_error``,
-      ``fluid_force``, ``centroid``, ``springs``; a check's ``time``, ``crossings``, ``total``);
+      ``newton_steps``, ``fluid_force``, ``centroid``, ``springs`` and ``surface`` (its
+      boundary facets: loop edges in 2D, outward triangles in 3D); a check's ``time``,
+      ``crossings``, ``total``);
     - ``case``: the validated case the run used; ``case_text``: its TOML text;
     - ``complete``: False for a run that stopped before its end.
     """
