@@ -245,6 +245,11 @@ shear_stiffness = 1.0
 [[check]]
 kind = "body_crossing"
 body = "box"
+[[probe]]
+name = "corner"
+kind = "displacement"
+body = "box"
+nodes = [26]
 """
 
 TIGHT = ["-pressure_ksp_rtol", "1e-12"]
@@ -282,6 +287,13 @@ def test_both_schemes_run_a_few_steps_in_3d(tank_case, tmp_path, scheme):
     weight = 27 * 500.0 * 0.02 ** 3 * 9.81
     assert series["fluid_force"][-1, 2] > weight
     assert np.abs(series["fluid_force"][-1, :2]).max() < 0.2 * series["fluid_force"][-1, 2]
+    # A displacement probe on a 3D lattice follows node 26 (the far top corner) from its
+    # rest position (0.19, 0.09, 0.11), risen with the box.
+    with open_result(tmp_path) as run:
+        moved = run.frames[-1].bodies["box"]["position"][26] - [0.19, 0.09, 0.11]
+        value = run.probes["corner"].value[-1]
+    np.testing.assert_allclose(value, moved, rtol=0, atol=1e-12)
+    assert value[2] > 0.0
 
 
 def test_at_the_fluids_density_the_schemes_agree_in_3d(tank_case, tmp_path):
