@@ -194,6 +194,37 @@ def test_held_force_substeps_match_the_numpy_loop_in_3d():
     assert np.allclose(compiled[1], velocity, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_compiled_substeps_with_loads_and_constraint_match_the_numpy_loop(d):
+    """kernels.body_substeps against Body.acceleration_at's substeps (compiled = False)."""
+    def body():
+        position, springs, _, boundary = lattice_geometry((4,) * d, 0.01, (0.0,) * d)
+        velocity = 0.2 * np.random.default_rng(6).standard_normal(position.shape)
+        top = np.flatnonzero(position[:, -1] == position[:, -1].max())
+        side = np.flatnonzero(position[:, 0] == 0.0)
+        loads = [(top, -0.3 * np.eye(d)[-1], 0.0, 0.02, 0.005),
+                 (side, 0.1 * np.eye(d)[0], 0.004, 1.0, 0.0)]
+        b = Body("block", position, velocity, 0.01, springs, 1000.0, 0.2, boundary,
+                 pinned=position[:, -1] == 0.0, gravity=-9.81 * np.eye(d)[-1], loads=loads)
+        b.fluid_force[:] = np.linspace(-1e-3, 1e-3, b.position.size).reshape(b.position.shape)
+        b.constraint_iterations, b.constraint_tolerance = 8, 1e-12
+        return b
+    compiled, numpy_form = body(), body()
+    numpy_form.compiled = False
+    h = 0.5 * compiled.stability_limit()
+    steps = []
+    for step in range(6):
+        compiled.advance(step * 10 * h, 10 * h, h)
+        numpy_form.advance(step * 10 * h, 10 * h, h)
+        steps.append((compiled.newton_steps, numpy_form.newton_steps))
+    assert np.allclose(compiled.position, numpy_form.position, rtol=0, atol=1e-15)
+    assert np.allclose(compiled.velocity, numpy_form.velocity, rtol=1e-9, atol=1e-12)
+    assert compiled.multiplier == pytest.approx(numpy_form.multiplier, rel=1e-6)
+    # The same steps, but for a residual within round-off of the tolerance.
+    assert all(abs(a - b) <= 1 for a, b in steps) and max(a for a, _ in steps) >= 1
+    assert abs(compiled.volume_error()) < 1e-11
+
+
 # ---------------------------------------------------------------------------
 # The multiplier, iterated
 

@@ -12,7 +12,7 @@ import time as wallclock
 
 import numpy as np
 
-from parmps.core.particles import FLUID, KIND_NAMES
+from parmps.core.particles import FLUID, KIND_NAMES, Particles
 from parmps.core.settings import has_fluid
 from parmps.io.checkpoint import write_checkpoint
 from parmps.io.frames import FrameWriter
@@ -57,8 +57,10 @@ class Simulation:
             self.decomposition = None
             self.stepper = SolidStepper(case, comm, self.model)
             self.counts = {"solid node": sum(len(body.position) for body in self.model.bodies)}
-            if comm.rank == 0:
-                self.state.particles = self.model.node_particles(every_node=True)
+            # Rank 0 writes the nodes; the others hold none, of the case's dimension
+            # (the frame writer's exchange packs every rank's rows alike).
+            self.state.particles = (self.model.node_particles(every_node=True)
+                                    if comm.rank == 0 else Particles.empty(case["dimension"]))
         if checkpoint is not None:
             self._restore(checkpoint.state)
 

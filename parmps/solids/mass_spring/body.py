@@ -42,8 +42,8 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.solids.mass_spring.kernels import held_force_substeps, network_forces
-from parmps.solids.mass_spring.surface import enclosed_volume, volume_gradient
+from parmps.solids.mass_spring.kernels import body_substeps, held_force_substeps, network_forces
+from parmps.solids.mass_spring.surface import determinant_terms, enclosed_volume, volume_gradient
 
 log = logging.getLogger(__name__)
 
@@ -153,10 +153,13 @@ def volume_multiplier(position, facets, rest_volume, velocity, inverse_mass, for
     velocity), ``force`` (everything but the constraint) (s, d), ``inverse_mass``
     (s,), ``facets`` indexing them. Starts from eq. 12 (:func:`area_multiplier`),
     which zeroes the next position's volume to first order, then takes up to
-    ``iterations`` Newton steps on lambda alone (as SHAKE does), each on the true
-    volume of the predicted position x + dt v + dt^2 M^-1 (F - gradV lambda) with
-    gradV held at x, until |V - V0| <= tolerance V0. Returns (lambda, gradV (s, d),
-    the Newton steps taken).
+    ``iterations`` Newton steps on lambda alone, each on the true volume of the
+    predicted position x + dt v + dt^2 M^-1 (F - gradV lambda), until
+    |V - V0| <= tolerance V0. As in SHAKE, the slope dV/dlambda is taken at the
+    current position, -dt^2 gradV.M^-1 gradV (eq. 12's denominator), not at the
+    predicted one: each step then shrinks the error by about the step's
+    displacement over the body's size, and needs the volume alone. Returns
+    (lambda, gradV (s, d), the Newton steps taken).
     """
     gradient = volume_gradient(position, facets)
     phi = enclosed_volume(position, facets) - rest_volume
@@ -165,15 +168,11 @@ def volume_multiplier(position, facets, rest_volume, velocity, inverse_mass, for
         return multiplier, gradient, 0
     free = position + dt * velocity + dt ** 2 * inverse_mass[:, None] * force
     push = dt ** 2 * inverse_mass[:, None] * gradient
+    slope = float(np.sum(push * gradient))
     limit = tolerance * abs(rest_volume)
     for step in range(iterations):
-        predicted = free - push * multiplier
-        residual = enclosed_volume(predicted, facets) - rest_volume
+        residual = enclosed_volume(free - push * multiplier, facets) - rest_volume
         if abs(residual) <= limit:
-            return multiplier, gradient, step
-        # d residual / d lambda = -gradV(predicted) . M^-1 gradV dt^2.
-        slope = float(np.sum(volume_gradient(predicted, facets) * push))
-        if slope <= 0.0:
             return multiplier, gradient, step
         multiplier += residual / slope
     return multiplier, gradient, iterations
@@ -276,6 +275,10 @@ class Body:
         self.constraint_tolerance = 0.0
         self.multiplier = 0.0
         self.newton_steps = 0  # the most any substep of the last advance took
+        # False: the substeps with loads or the constraint run acceleration_at, the numpy
+        # statement the compiled body_substeps is tested against.
+        self.compiled = True
+        self._determinant_terms = determinant_terms(d)
 
     def _set_surface(self, facets):
         """The boundary facets, and the same facets over the boundary nodes alone: the
@@ -366,17 +369,27 @@ class Body:
             self.acceleration = self.acceleration_at(time, self.velocity, h)
         position, velocity = self.position, self.velocity
         self.newton_steps = 0
+        # Gravity and the fluid force are held over the step.
+        held = self.mass[:, None] * self.gravity + self.fluid_force
         if not self.volume_constraint and not len(self.load_field):
             # Nothing in the force but the springs changes within the step: the whole
             # substep loop runs compiled (a stiff body takes ~1000 substeps a step).
-            external = self.mass[:, None] * self.gravity + self.fluid_force
             held_force_substeps(position, velocity, self.acceleration, self.inverse_mass,
                                 self.springs, self.rest_length, self.stiffness, self.damping,
-                                self.axial_damping, external, h, n_sub)
-            return n_sub
-        for step in range(n_sub):
-            velocity += 0.5 * h * self.acceleration
-            position += h * velocity
-            self.acceleration = self.acceleration_at(time + (step + 1) * h, velocity, h)
-            velocity += 0.5 * h * self.acceleration
+                                self.axial_damping, held, h, n_sub)
+        elif self.compiled:
+            # Loads and the constraint too: the same physics as acceleration_at.
+            self.multiplier, self.newton_steps = body_substeps(
+                position, velocity, self.acceleration, self.inverse_mass, self.springs,
+                self.rest_length, self.stiffness, self.damping, self.axial_damping, held,
+                self.load_field, self.load_start, self.load_end, self.load_ramp, time, h,
+                n_sub, self.volume_constraint, self.surface_nodes, self.surface_facets,
+                self.rest_volume, self.constraint_tolerance, self.constraint_iterations,
+                *self._determinant_terms)
+        else:
+            for step in range(n_sub):
+                velocity += 0.5 * h * self.acceleration
+                position += h * velocity
+                self.acceleration = self.acceleration_at(time + (step + 1) * h, velocity, h)
+                velocity += 0.5 * h * self.acceleration
         return n_sub

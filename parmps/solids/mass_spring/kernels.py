@@ -77,3 +77,163 @@ def held_force_substeps(position, velocity, acceleration, inverse_mass, springs,
             for axis in range(d):
                 acceleration[k, axis] = (force[k, axis] + external[k, axis]) * inverse_mass[k]
                 velocity[k, axis] += 0.5 * h * acceleration[k, axis]
+
+
+# --------------------------------------------------------------------------
+# The volume constraint and the general substep loop (loads and constraint)
+
+
+@numba.njit(cache=True)
+def facet_volume(x, facets, permutations, signs, gradient, with_gradient):
+    """d! V of the facets over the positions ``x`` (s, d) (surface.enclosed_volume), about
+    the first facet's first node; with ``with_gradient``, d! dV/dx into ``gradient`` (s, d).
+
+    ``permutations`` (d!, d) and ``signs`` (d!,): the terms of a d x d determinant.
+    """
+    s, d = x.shape
+    apex = np.empty(d)
+    for a in range(d):
+        apex[a] = x[facets[0, 0], a]
+    if with_gradient:
+        gradient[:, :] = 0.0
+    corner = np.empty((d, d))
+    factor = np.empty(d)
+    before = np.empty(d + 1)
+    total = 0.0
+    for f in range(facets.shape[0]):
+        for r in range(d):
+            for a in range(d):
+                corner[r, a] = x[facets[f, r], a] - apex[a]
+        for p in range(permutations.shape[0]):
+            # before[r]: the sign times the factors of rows 0..r-1.
+            before[0] = signs[p]
+            for r in range(d):
+                factor[r] = corner[r, permutations[p, r]]
+                before[r + 1] = before[r] * factor[r]
+            total += before[d]
+            if with_gradient:
+                # The cofactor of row r: the term without its factor from row r,
+                # the factors before r times those after it.
+                after = 1.0
+                for r in range(d - 1, -1, -1):
+                    gradient[facets[f, r], permutations[p, r]] += before[r] * after
+                    after *= factor[r]
+    return total
+
+
+@numba.njit(cache=True)
+def _newton(x, velocity, inverse_mass, force, nodes, facets, rest_volume, dt, tolerance,
+            iterations, permutations, signs, factorial, gradient, multiplier, slope):
+    """Newton steps on lambda alone, on the true volume of the predicted next position
+    x + dt v + dt^2 M^-1 (F - gradV lambda), gradV and the slope ``slope`` =
+    dt^2 gradV.M^-1 gradV held at x (body.volume_multiplier)."""
+    s, d = x.shape
+    free = np.empty((s, d))
+    push = np.empty((s, d))
+    predicted = np.empty((s, d))
+    no_gradient = np.empty((0, d))
+    for k in range(s):
+        w = inverse_mass[nodes[k]]
+        for a in range(d):
+            free[k, a] = (x[k, a] + dt * velocity[nodes[k], a]
+                          + dt ** 2 * w * force[nodes[k], a])
+            push[k, a] = dt ** 2 * w * gradient[k, a]
+    limit = tolerance * abs(rest_volume)
+    for step in range(iterations):
+        for k in range(s):
+            for a in range(d):
+                predicted[k, a] = free[k, a] - push[k, a] * multiplier
+        residual = (facet_volume(predicted, facets, permutations, signs, no_gradient, False)
+                    / factorial - rest_volume)
+        if abs(residual) <= limit:
+            return multiplier, step
+        multiplier += residual / slope
+    return multiplier, iterations
+
+
+@numba.njit(cache=True)
+def constrain(position, velocity, inverse_mass, force, nodes, facets, rest_volume, dt,
+              tolerance, iterations, permutations, signs, factorial):
+    """body.volume_multiplier compiled, on the surface ``nodes`` (``facets`` index them):
+    subtracts gradV lambda from ``force``; returns (lambda, Newton steps taken)."""
+    s, d = nodes.shape[0], position.shape[1]
+    x = np.empty((s, d))
+    gradient = np.empty((s, d))
+    for k in range(s):
+        for a in range(d):
+            x[k, a] = position[nodes[k], a]
+    phi = facet_volume(x, facets, permutations, signs, gradient, True) / factorial - rest_volume
+    # Seed eq. (12): body.area_multiplier.
+    denominator = 0.0
+    along_velocity = 0.0
+    along_force = 0.0
+    for k in range(s):
+        w = inverse_mass[nodes[k]]
+        for a in range(d):
+            gradient[k, a] /= factorial
+            denominator += w * gradient[k, a] * gradient[k, a]
+            along_velocity += gradient[k, a] * velocity[nodes[k], a]
+            along_force += w * gradient[k, a] * force[nodes[k], a]
+    if denominator <= 0.0:
+        return 0.0, 0
+    multiplier = (phi / dt ** 2 + along_velocity / dt + along_force) / denominator
+    steps = 0
+    if iterations > 0 and multiplier != 0.0:
+        multiplier, steps = _newton(x, velocity, inverse_mass, force, nodes, facets,
+                                    rest_volume, dt, tolerance, iterations, permutations,
+                                    signs, factorial, gradient, multiplier,
+                                    dt ** 2 * denominator)
+    for k in range(s):
+        for a in range(d):
+            force[nodes[k], a] -= gradient[k, a] * multiplier
+    return multiplier, steps
+
+
+@numba.njit(cache=True)
+def load_factor(time, start, end, ramp):
+    """body.load_factor for one window, scalar."""
+    if not (time >= start and time < end):
+        return 0.0
+    rise = (time - start) / ramp if ramp > 0 else 1.0
+    fall = (end - time) / ramp if ramp > 0 else 1.0
+    return min(max(min(rise, fall), 0.0), 1.0)
+
+
+@numba.njit(cache=True)
+def body_substeps(position, velocity, acceleration, inverse_mass, springs, rest_length,
+                  stiffness, damping, axial_damping, held, load_field, load_start, load_end,
+                  load_ramp, time, h, count, constrained, nodes, facets, rest_volume,
+                  tolerance, iterations, permutations, signs, factorial):
+    """``count`` velocity-Verlet substeps from ``time`` of a body with windowed loads and/or
+    the volume constraint: body.Body.acceleration_at's force (``held`` = gravity + fluid
+    force, plus the loads at the substep's end, plus the springs, minus gradV lambda),
+    compiled. Returns (the last lambda, the most Newton steps of any substep)."""
+    n, d = position.shape
+    force = np.empty((n, d))
+    multiplier = 0.0
+    most = 0
+    for step in range(count):
+        for k in range(n):
+            for a in range(d):
+                velocity[k, a] += 0.5 * h * acceleration[k, a]
+                position[k, a] += h * velocity[k, a]
+        now = time + (step + 1) * h
+        force[:, :] = held
+        for load in range(load_field.shape[0]):
+            factor = load_factor(now, load_start[load], load_end[load], load_ramp[load])
+            if factor != 0.0:
+                for k in range(n):
+                    for a in range(d):
+                        force[k, a] += factor * load_field[load, k, a]
+        network_forces(position, velocity, springs, rest_length, stiffness, damping,
+                       axial_damping, force)
+        if constrained:
+            multiplier, steps = constrain(position, velocity, inverse_mass, force, nodes,
+                                          facets, rest_volume, h, tolerance, iterations,
+                                          permutations, signs, factorial)
+            most = max(most, steps)
+        for k in range(n):
+            for a in range(d):
+                acceleration[k, a] = force[k, a] * inverse_mass[k]
+                velocity[k, a] += 0.5 * h * acceleration[k, a]
+    return multiplier, most

@@ -37,6 +37,14 @@ def _permutations(d):
     return out
 
 
+def determinant_terms(d):
+    """(permutations (d!, d) int64, signs (d!,), d!) as arrays, for the compiled
+    kernels.facet_volume."""
+    terms = _permutations(d)
+    return (np.array([p for p, _ in terms], dtype=np.int64),
+            np.array([sign for _, sign in terms]), float(math.factorial(d)))
+
+
 def _corners(position, facets):
     """(m, d, d) facet corner positions about the apex: [facet, corner, component]."""
     position = np.asarray(position, dtype=float)
