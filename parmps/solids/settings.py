@@ -38,7 +38,8 @@ SECTIONS = {
         "nx": Key("int", 0, ge=0, doc="lattice: nodes along x"),
         "ny": Key("int", 0, ge=0, doc="lattice: nodes along y"),
         "nz": Key("int", 0, ge=0, doc="3D lattice: nodes along z"),
-        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]"),
+        "spacing": Key("float", 0.0, ge=0.0, doc="lattice: node spacing [m]; shell: target "
+                                                 "edge length [m]"),
         "lower": Key("vector", ZERO, doc="lattice: position of the node with the smallest "
                                          "coordinates"),
         "nodes": Key("points", [], doc="general: node positions [[x, y], ...]"),

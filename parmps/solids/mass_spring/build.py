@@ -30,8 +30,8 @@ from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
-from parmps.solids.mass_spring.shell import check_keys as check_shell_keys, shell_body
 from parmps.solids.mass_spring.lattice import FACE_DIAGONAL, lattice_geometry  # noqa: F401
+from parmps.solids.mass_spring.shell import check_keys as check_shell_keys, shell_body
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,7 @@ arrays out, no Python loop over triangles.
   exists).
 
 Geodesic spheres: every face of a base polyhedron (icosahedron or octahedron) is
-cut into ``frequency``^2 triangles on a barycentric grid and the grid points are
+cut into frequency^2 triangles on a barycentric grid and the grid points are
 projected on the sphere. Frequency 2^k is k levels of midpoint subdivision.
 """
 
@@ -46,6 +46,11 @@ MERGE_TOLERANCE = 1e-5
 
 # A triangle with less than this share of the median edge squared has no area.
 DEGENERATE_AREA = 1e-10
+
+# A generated shell larger than this is a unit mistake (spacing in mm for a body in
+# m), not a body: a mass-spring body of a case has thousands of nodes, and this many
+# triangles already take gigabytes to build.
+MAX_TRIANGLES = 2_000_000
 
 
 def _icosahedron():
@@ -111,15 +116,21 @@ def geodesic(base_vertices, base_faces, frequency):
     return vertices, triangles.reshape(-1, 3)
 
 
-def _frequency(arc, edge_length, frequency, what):
-    """The geodesic frequency: given, or the least whose base-edge arc / n <= edge_length."""
+def _frequency(arc, edge_length, frequency, what, faces, extra=0):
+    """The geodesic frequency: given, or the least whose base-edge arc / n <= edge_length;
+    refused if ``faces`` n^2 + ``extra`` triangles would exceed MAX_TRIANGLES."""
     if frequency is not None:
         if int(frequency) < 1:
             raise CaseError(f"{what}: refinement must be >= 1, got {frequency}")
-        return int(frequency)
-    if edge_length is None or not edge_length > 0:
+        n = int(frequency)
+    elif edge_length is None or not edge_length > 0:
         raise CaseError(f"{what}: give a target edge length > 0 or a refinement")
-    return max(1, math.ceil(arc / edge_length * (1.0 - 1e-12)))
+    else:
+        n = max(1, math.ceil(arc / edge_length * (1.0 - 1e-12)))
+    if faces * n * n + extra > MAX_TRIANGLES:
+        raise CaseError(f"{what}: refinement {n} makes {faces * n * n + extra:.3g} triangles "
+                        f"(more than {MAX_TRIANGLES:.0e}); check the units of spacing")
+    return n
 
 
 def icosphere(radius, frequency=None, edge_length=None, center=(0.0, 0.0, 0.0)):
@@ -129,7 +140,7 @@ def icosphere(radius, frequency=None, edge_length=None, center=(0.0, 0.0, 0.0)):
     icosahedron's edge spans an arc of arccos(1/sqrt5) radians).
     """
     n = _frequency(radius * math.acos(1.0 / math.sqrt(5.0)), edge_length, frequency,
-                   "sphere")
+                   "sphere", 20)
     vertices, triangles = geodesic(*_icosahedron(), n)
     return radius * vertices + np.asarray(center, dtype=float), triangles
 
@@ -160,7 +171,9 @@ def capsule(radius, length, edge_length=None, frequency=None, center=(0.0, 0.0, 
     """
     if not radius > 0 or length < 0:
         raise CaseError(f"capsule: radius must be > 0 and length >= 0, got {radius}, {length}")
-    n = _frequency(radius * math.pi / 2.0, edge_length, frequency, "capsule")
+    n = _frequency(radius * math.pi / 2.0, edge_length, frequency, "capsule", 8,
+                   extra=2 * (length / edge_length) * (2 * math.pi * radius / edge_length)
+                   if edge_length else 0)
     unit, triangles = geodesic(*_octahedron(), n)
     vertices = radius * unit
     equator = _ring_order(vertices, np.flatnonzero(unit[:, 2] == 0.0))
@@ -204,7 +217,7 @@ def red_blood_cell(diameter=RBC_DIAMETER, edge_length=None, frequency=None,
     """
     if not diameter > 0:
         raise CaseError(f"red_blood_cell: diameter must be > 0, got {diameter}")
-    n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell")
+    n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell", 8)
     unit, triangles = geodesic(*_octahedron(), n)
     rho2 = unit[:, 0] ** 2 + unit[:, 1] ** 2
     c0, c1, c2 = coefficients
@@ -308,6 +321,21 @@ def _vertex_fans(triangles, n_vertices):
     return np.bincount(pairs[:, 0], minlength=n_vertices)
 
 
+def surface_parts(triangles, n_vertices):
+    """Which connected part of the mesh every vertex is on: the least vertex index of
+    its part. Labels spread along the edges, each pass also jumping to the label's
+    own label, until nothing changes."""
+    start, end, _ = _half_edges(np.asarray(triangles))
+    label = np.arange(n_vertices)
+    while True:
+        spread = label.copy()
+        np.minimum.at(spread, start, label[end])
+        spread = spread[spread]
+        if np.array_equal(spread, label):
+            return label
+        label = spread
+
+
 # --------------------------------------------------------------------------
 # Checks
 
@@ -389,6 +417,13 @@ def check_closed_surface(source, vertices, triangles):
         v = int(np.flatnonzero(pinched)[0])
         raise CaseError(f"{source}: {int(pinched.sum())} non-manifold vertices (where separate "
                         f"parts of the surface touch), e.g. vertex {v} at {_at(vertices, v)}")
+    parts = np.unique(surface_parts(triangles, len(vertices)))
+    if len(parts) > 1:
+        # One multiplier for several surfaces would let volume pass between them.
+        raise CaseError(f"{source}: the mesh is {len(parts)} separate closed surfaces (those "
+                        f"of vertices {', '.join(map(str, parts[:3]))}"
+                        f"{', ...' if len(parts) > 3 else ''}); a shell body is one surface: "
+                        f"give each its own [[body]]")
     volume = enclosed_volume(vertices, triangles)
     extent = float(np.ptp(vertices, axis=0).max())
     if volume < 0:
@@ -507,18 +542,12 @@ def winding_number(points, vertices, triangles, chunk=200_000):
         det = np.einsum("...i,...i", a, np.cross(b, c))
         den = (la * lb * lc + np.einsum("...i,...i", a, b) * lc
                + np.einsum("...i,...i", b, c) * la + np.einsum("...i,...i", c, a) * lb)
-        out[begin:begin + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+        # A point in a triangle's plane sees it edge-on: its solid angle jumps from
+        # +2 pi to -2 pi across the triangle; take the mean of the two, 0 (not the
+        # +2 pi atan2 gives), so a point on the surface has winding number 1/2.
+        angle = np.where(det == 0.0, 0.0, np.arctan2(det, den))
+        out[begin:begin + step] = angle.sum(axis=1) / (2.0 * np.pi)
     return out
-
-
-def points_inside(points, vertices, triangles):
-    """Whether each point lies inside the closed outward surface; shape (k,)."""
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    inside = np.zeros(len(points), bool)
-    lower, upper = vertices.min(axis=0), vertices.max(axis=0)
-    box = np.all((points >= lower) & (points <= upper), axis=1)
-    inside[box] = winding_number(points[box], vertices, triangles) > 0.5
-    return inside
 
 
 def _edge_side(p, low, high):
@@ -534,6 +563,35 @@ def _edge_side(p, low, high):
     return e, np.where(side == 0, np.sign(tie_y), side)
 
 
+def _crossings(xy, triangle, vertices, triangles):
+    """Where vertical lines through ``xy`` (k, 2) cross ``triangle`` (k,) (indices
+    into ``triangles``): (hit (k,), height of each hit, the sign of each hit's
+    normal z: +1 where the line leaves an outward surface going up)."""
+    tri = triangles[triangle]
+    sides, values = [], []
+    for k in range(3):  # the triangle's three sides a->b, b->c, c->a
+        a, b = tri[:, k], tri[:, (k + 1) % 3]
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        e, side = _edge_side(xy, vertices[lo, :2], vertices[hi, :2])
+        flip = np.where(a == lo, 1.0, -1.0)
+        sides.append(flip * side)
+        values.append(flip * e)
+    a, b, c = (vertices[tri[:, k]] for k in range(3))
+    normal_z = np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                       - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    hit = (normal_z != 0) & np.all(np.array(sides) == normal_z, axis=0)
+    # Barycentric height of the crossing: the side opposite a corner weighs it.
+    e_ab, e_bc, e_ca = (v[hit] for v in values)
+    z = (e_bc * a[hit, 2] + e_ca * b[hit, 2] + e_ab * c[hit, 2]) / (e_ab + e_bc + e_ca)
+    return hit, z, normal_z[hit]
+
+
+def _ragged(count):
+    """(owner, local index) of every item when owner k has count[k] items."""
+    owner = np.repeat(np.arange(len(count)), count)
+    return owner, np.arange(int(count.sum())) - np.repeat(np.cumsum(count) - count, count)
+
+
 def _column_pairs(vertices, triangles, origin, spacing, low, shape):
     """(triangle, column i, column j) for every lattice column within a triangle's
     xy bounding box, expanded without a loop."""
@@ -542,9 +600,7 @@ def _column_pairs(vertices, triangles, origin, spacing, low, shape):
     last = np.minimum(np.floor(corners.max(axis=1)).astype(np.int64) - low[:2],
                       np.array(shape[:2]) - 1)
     span = np.maximum(last - first + 1, 0)
-    count = span[:, 0] * span[:, 1]
-    triangle = np.repeat(np.arange(len(triangles)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
+    triangle, local = _ragged(span[:, 0] * span[:, 1])
     width = span[triangle, 1]
     i = first[triangle, 0] + local // np.maximum(width, 1)
     j = first[triangle, 1] + local % np.maximum(width, 1)
@@ -570,32 +626,55 @@ def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
         return np.empty((0, 3))
     triangle, i, j = _column_pairs(vertices, triangles, origin, spacing, low, shape)
     column = origin[:2] + spacing * np.column_stack([i + low[0], j + low[1]])
-    tri = triangles[triangle]
-    sides, values = [], []
-    for k in range(3):  # the triangle's three sides a->b, b->c, c->a
-        a, b = tri[:, k], tri[:, (k + 1) % 3]
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        e, side = _edge_side(column, vertices[lo, :2], vertices[hi, :2])
-        flip = np.where(a == lo, 1.0, -1.0)
-        sides.append(flip * side)
-        values.append(flip * e)
-    a, b, c = (vertices[tri[:, k]] for k in range(3))
-    normal_z = np.sign((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
-                       - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
-    hit = (normal_z != 0) & np.all(np.array(sides) == normal_z, axis=0)
-    # Barycentric height of the crossing: the side opposite a corner weighs it.
-    e_ab, e_bc, e_ca = (v[hit] for v in values)
-    z = (e_bc * a[hit, 2] + e_ca * b[hit, 2] + e_ab * c[hit, 2]) / (e_ab + e_bc + e_ca)
+    hit, z, sign = _crossings(column, triangle, vertices, triangles)
     # Lattice levels strictly below the crossing: 0 .. below - 1.
     below = np.clip(np.ceil((z - origin[2]) / spacing - low[2]).astype(np.int64), 0, shape[2])
     flat = (i[hit] * shape[1] + j[hit]) * (shape[2] + 1) + below
-    jumps = np.bincount(flat, weights=normal_z[hit],
+    jumps = np.bincount(flat, weights=sign,
                         minlength=shape[0] * shape[1] * (shape[2] + 1))
     jumps = jumps.reshape(shape[0], shape[1], shape[2] + 1)
     # Winding number of level k: the crossings with below > k.
     winding = np.cumsum(jumps[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
     inside = np.argwhere(winding > 0.5)
     return origin + spacing * (inside + low)
+
+
+def points_inside(points, vertices, triangles):
+    """Whether each point (k, 3) lies inside the closed outward surface; shape (k,).
+
+    The ray test of :func:`fill_inside` for arbitrary points: triangles are binned
+    by their xy bounding box on a grid of about the median edge, each point is
+    tested against the triangles of its bin only, and the signs of the crossings
+    above it add up to its winding number. Points on the surface fall either side.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    inside = np.zeros(len(points), bool)
+    lower, upper = vertices.min(axis=0), vertices.max(axis=0)
+    candidates = np.flatnonzero(np.all((points >= lower) & (points <= upper), axis=1))
+    if not len(candidates) or not len(triangles):
+        return inside
+    size = float(np.median(edge_lengths(vertices, triangles)))
+    bins = np.maximum(np.ceil((upper[:2] - lower[:2]) / size).astype(np.int64), 1)
+    corners = (vertices[triangles][:, :, :2] - lower[:2]) / size
+    first = np.clip(np.floor(corners.min(axis=1)).astype(np.int64), 0, bins - 1)
+    last = np.clip(np.floor(corners.max(axis=1)).astype(np.int64), 0, bins - 1)
+    span = last - first + 1
+    triangle, local = _ragged(span[:, 0] * span[:, 1])
+    cell = ((first[triangle, 0] + local // span[triangle, 1]) * bins[1]
+            + first[triangle, 1] + local % span[triangle, 1])
+    order = np.argsort(cell, kind="stable")
+    triangle, per_cell = triangle[order], np.bincount(cell, minlength=bins.prod())
+    start = np.cumsum(per_cell) - per_cell
+    p = points[candidates]
+    where = np.clip(np.floor((p[:, :2] - lower[:2]) / size).astype(np.int64), 0, bins - 1)
+    own = where[:, 0] * bins[1] + where[:, 1]
+    point, local = _ragged(per_cell[own])
+    pairs = triangle[start[own[point]] + local]
+    hit, z, sign = _crossings(p[point, :2], pairs, vertices, triangles)
+    above = z > p[point[hit], 2]
+    winding = np.bincount(point[hit][above], weights=sign[above], minlength=len(p))
+    inside[candidates] = winding > 0.5
+    return inside
 
 
 # --------------------------------------------------------------------------
@@ -662,9 +741,29 @@ def _oriented(mesh, axis, center):
     return vertices[:, turn] + np.asarray(center, dtype=float), triangles
 
 
+# The keys each shape reads, beside center; the others must keep their defaults.
+SHAPE_KEYS = {"sphere": ("radius", "spacing", "refinement"),
+              "capsule": ("radius", "length", "axis", "spacing", "refinement"),
+              "red_blood_cell": ("diameter", "axis", "spacing", "refinement"),
+              "file": ("mesh",)}
+UNSET = {"radius": 0.0, "length": 0.0, "diameter": 0.0, "axis": "z", "mesh": "",
+         "spacing": 0.0, "refinement": 0}
+
+
+def _check_shape_keys(label, spec):
+    shape = spec["shape"]
+    for key, unset in UNSET.items():
+        if spec[key] != unset and key not in SHAPE_KEYS[shape]:
+            raise CaseError(f"{label}.{key} does not apply to shape = \"{shape}\" (it reads "
+                            f"{', '.join(SHAPE_KEYS[shape])} and center)")
+    if spec["spacing"] and spec["refinement"]:
+        raise CaseError(f"{label}: give spacing (a target edge length) or refinement, not both")
+
+
 def shell_mesh(label, spec):
     """(vertices, triangles) of a ``type = "shell"`` body, checked; ``label`` names
     the body in messages."""
+    _check_shape_keys(label, spec)
     shape, h = spec["shape"], spec["spacing"] or None
     frequency = spec["refinement"] or None
     if shape == "file":
@@ -675,16 +774,17 @@ def shell_mesh(label, spec):
         vertices, triangles = read_mesh(spec["mesh"], source)
         mesh = (vertices + np.asarray(spec["center"], dtype=float), triangles)
     else:
-        if spec["mesh"]:
-            raise CaseError(f"{label}.mesh needs shape = \"file\" (shape is \"{shape}\")")
         if shape in ("sphere", "capsule") and not spec["radius"] > 0:
             raise CaseError(f"{label}.radius must be > 0 for shape = \"{shape}\"")
-        if shape == "sphere":
-            made = icosphere(spec["radius"], frequency, h)
-        elif shape == "capsule":
-            made = capsule(spec["radius"], spec["length"], h, frequency)
-        else:
-            made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+        try:
+            if shape == "sphere":
+                made = icosphere(spec["radius"], frequency, h)
+            elif shape == "capsule":
+                made = capsule(spec["radius"], spec["length"], h, frequency)
+            else:
+                made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+        except CaseError as exc:  # the generators name themselves, not the body
+            raise CaseError(f"{label}: {exc}") from None
         mesh = _oriented(made, spec["axis"], spec["center"])
         source = f"{label} ({shape} generator)"
     check_closed_surface(source, *mesh)
