@@ -153,6 +153,16 @@ def test_sides_of_the_plate_beside_beyond_its_edges_and_outside_the_band():
                                   mid_line_sides(two, line, 0.035))
 
 
+def test_the_sides_do_not_depend_on_the_chunks():
+    vertices, facets = lattice_mid_surface(PLATE, (9, 5, 2))
+    points = np.random.default_rng(5).uniform([-0.02, -0.02, -0.03], [0.1, 0.06, 0.04],
+                                              size=(700, 3))
+    whole = mid_surface_sides(points, vertices, facets, PLATE_BAND)
+    assert set(np.unique(whole)) == {-1, 0, 1}
+    np.testing.assert_array_equal(
+        mid_surface_sides(points, vertices, facets, PLATE_BAND, chunk=100), whole)
+
+
 def _crossings(path, vertices, facets):
     """Crossings along one particle's path (one position a step), as the check counts."""
     total, previous = 0, (np.zeros(0, np.int64), np.zeros(0, np.int8))

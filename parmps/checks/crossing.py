@@ -135,33 +135,42 @@ def _triangle_distance2(points, a, b, c):
     return np.where(inside, height * height, edges), height
 
 
-def mid_surface_sides(points, vertices, facets, band):
+def mid_surface_sides(points, vertices, facets, band, chunk=200_000):
     """Side of a mid-surface (``vertices`` (v, d), ``facets`` (m, d)) of each of ``points``
     (n, d): -1 or +1, or 0 beyond its border or farther than ``band``. 2D: the mid-line's
     :func:`mid_line_sides` (its vertices run along the line); 3D: the sign of the nearest
     triangle's normal against the point, 0 where the nearest point of the surface lies on
-    its border (a point round its edge, as a 2D point beyond an end)."""
+    its border (a point round its edge, as a 2D point beyond an end). Every point is tested
+    against every triangle, in chunks of about ``chunk`` pairs (a large plate has thousands
+    of triangles)."""
     vertices = np.asarray(vertices, dtype=float)
     d = vertices.shape[1]
     if d == 2:
         return mid_line_sides(points, vertices, band)
     points = np.asarray(points, dtype=float).reshape(-1, d)
+    facets = np.asarray(facets, dtype=np.int64)
     sides = np.zeros(len(points), np.int8)
-    if len(points) == 0:
-        return sides
+    border = border_edges(facets)
+    step = max(1, chunk // max(1, len(facets)))
+    for begin in range(0, len(points), step):
+        sides[begin:begin + step] = _surface_sides(points[begin:begin + step], vertices,
+                                                   facets, border, band)
+    return sides
+
+
+def _surface_sides(points, vertices, facets, border, band):
+    """:func:`mid_surface_sides` in 3D for one chunk of points; ``border`` its border edges."""
     a, b, c = (vertices[facets[:, k]] for k in range(3))
     distance2, height = _triangle_distance2(points, a, b, c)
     nearest = np.argmin(distance2, axis=1)
     rows = np.arange(len(points))
     surface2 = distance2[rows, nearest]
-    border = border_edges(facets)
     border2 = _segment_distance2(points, vertices[border[:, 0]],
                                  vertices[border[:, 1]]).min(axis=1)
     # On the border when no interior point of the surface is nearer than it (rounding aside).
     at_border = border2 <= surface2 * (1.0 + 1e-9) + 1e-30
     beside = ~at_border & (surface2 <= band * band)
-    sides[beside] = np.where(height[rows, nearest][beside] > 0.0, 1, -1)
-    return sides
+    return np.where(beside, np.where(height[rows, nearest] > 0.0, 1, -1), 0).astype(np.int8)
 
 
 def count_crossings(previous_ids, previous_sides, ids, sides):
