@@ -69,12 +69,6 @@ def test_the_command_line_refuses_a_mixed_case_in_one_line(tmp_path):
     assert "Traceback" not in result.stderr
 
 
-def test_a_body_in_a_3d_case_is_refused_before_its_keys_are_read():
-    text = TANK_3D + '\n[[body]]\nname = "b"\ntype = "lattice"\nnx = 3\nny = 3\n'
-    with pytest.raises(CaseError, match=r"\[\[body\]\]: solid bodies run in 2D cases only"):
-        _validate(text)
-
-
 def test_snapped_boxes_and_probes_lie_on_the_lattice_lines():
     case = _validate(DAM_BREAK_3D.read_text().replace(
         "spacing = 0.0366666666666666667", "spacing = 0.055"))

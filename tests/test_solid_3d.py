@@ -378,22 +378,6 @@ def cli(*args):
                           capture_output=True, text=True, timeout=300)
 
 
-def test_3d_case_with_fluid_and_a_body_is_refused_in_one_line(tmp_path):
-    case = tmp_path / "coupled_3d.toml"
-    case.write_text(BASE_3D + """
-[particles]
-spacing = 0.05
-[[fluid_block]]
-lower = [-0.5, -0.5, -0.5]
-upper = [0.0, 0.0, 0.0]
-""")
-    result = cli(case, "-o", tmp_path / "out")
-    assert result.returncode == 2, result.stderr
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, result.stderr
-    assert "coupling runs in 2D cases only so far" in lines[0] and "3D" in lines[0]
-
-
 def test_3d_solid_only_run_writes_nodes_surface_and_series(tmp_path):
     out = tmp_path / "out"
     result = cli(ROOT / "cases" / "mass_spring_7x7x7.toml", "-o", out, "--end-time", "0.02")

@@ -1,4 +1,5 @@
-"""Fluid through a thin body: particles whose path crossed the body's mid-line.
+"""Fluid through a thin body: particles whose path crossed the body's mid-line (in 3D its
+mid-surface).
 
 A thin lattice body (a gate, a plate, a membrane of several node rows) must
 hold the fluid back: water may flow round its free end, never through it.
@@ -10,6 +11,12 @@ one side at the previous step and is beside it on the other side now has
 crossed the mid-line within the step: between two points beside a straight
 segment on opposite sides the straight path cuts the segment. Going round an
 end passes through side 0 and is not counted.
+
+In 3D the body's mid-surface is the mean of its nodes through its thinnest direction, a
+grid of points triangulated two triangles a cell (:func:`lattice_mid_surface`); a particle
+is beside it when its nearest point on the surface is not on the surface's border, and its
+side is the sign of the nearest triangle's normal against it (:func:`mid_surface_sides`).
+The 2D mid-line is the same construction one dimension down, and keeps its own code.
 
 Why a step cannot skip the test: the band reaches two spacings beyond the
 body's half-thickness on each side, and a particle moves less than a spacing
@@ -71,6 +78,101 @@ def mid_line_sides(points, mid_line, band):
     return sides
 
 
+def lattice_mid_surface(position, shape):
+    """The mid-surface of a lattice body of ``shape`` (nx, ny[, nz]) nodes (node i + nx j
+    [+ nx ny k]): the mean of its nodes through the thinnest direction (x on a tie), as
+    (vertices, facets). 2D: the mid-line of :func:`lattice_mid_line`, facets its segments;
+    3D: a grid of points, two triangles (m, 3) a cell, all with the same orientation."""
+    shape = tuple(int(n) for n in shape)
+    d = len(shape)
+    grid = np.asarray(position, dtype=float)[:int(np.prod(shape))].reshape(shape[::-1] + (d,))
+    thin = int(np.argmin(shape))  # the lattice axis; the array's axes run reversed
+    mid = grid.mean(axis=d - 1 - thin)
+    vertices = mid.reshape(-1, d)
+    index = np.arange(len(vertices)).reshape(mid.shape[:-1])
+    if d == 2:
+        return vertices, np.column_stack([index[:-1], index[1:]])
+    a, b = index[:-1, :-1].ravel(), index[:-1, 1:].ravel()
+    c, e = index[1:, :-1].ravel(), index[1:, 1:].ravel()
+    facets = np.concatenate([np.column_stack([a, b, e]), np.column_stack([a, e, c])])
+    return vertices, facets
+
+
+def border_edges(facets):
+    """The edges (k, 2) of a triangulated surface that belong to one triangle only."""
+    edges = np.sort(np.concatenate([facets[:, [0, 1]], facets[:, [1, 2]],
+                                    facets[:, [2, 0]]]), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    return unique[count == 1]
+
+
+def _segment_distance2(points, start, end):
+    """Squared distance of every point (n, 3) to every segment (k) start -> end: (n, k)."""
+    direction = end - start
+    length2 = np.einsum("ij,ij->i", direction, direction)
+    offset = points[:, None, :] - start[None, :, :]
+    along = np.clip(np.einsum("nkj,kj->nk", offset, direction) / length2, 0.0, 1.0)
+    gap = offset - along[..., None] * direction[None, :, :]
+    return np.einsum("nkj,nkj->nk", gap, gap)
+
+
+def _triangle_distance2(points, a, b, c):
+    """Squared distance of every point (n, 3) to every triangle (m) abc, and the signed
+    height of the point over each triangle's plane along its normal (b - a) x (c - a)."""
+    normal = np.cross(b - a, c - a)
+    unit = normal / np.linalg.norm(normal, axis=1)[:, None]
+    offset = points[:, None, :] - a[None, :, :]
+    height = np.einsum("nmj,mj->nm", offset, unit)
+    foot = offset - height[..., None] * unit[None, :, :]
+    # The foot is inside when it lies on the inner side of all three edges.
+    inside = np.ones(height.shape, bool)
+    for p, q in ((a, b), (b, c), (c, a)):
+        edge_normal = np.cross(unit, q - p)
+        inside &= np.einsum("nmj,mj->nm", foot + (a - p)[None], edge_normal) >= 0.0
+    edges = np.minimum(np.minimum(_segment_distance2(points, a, b),
+                                  _segment_distance2(points, b, c)),
+                       _segment_distance2(points, c, a))
+    return np.where(inside, height * height, edges), height
+
+
+def mid_surface_sides(points, vertices, facets, band, chunk=200_000):
+    """Side of a mid-surface (``vertices`` (v, d), ``facets`` (m, d)) of each of ``points``
+    (n, d): -1 or +1, or 0 beyond its border or farther than ``band``. 2D: the mid-line's
+    :func:`mid_line_sides` (its vertices run along the line); 3D: the sign of the nearest
+    triangle's normal against the point, 0 where the nearest point of the surface lies on
+    its border (a point round its edge, as a 2D point beyond an end). Every point is tested
+    against every triangle, in chunks of about ``chunk`` pairs (a large plate has thousands
+    of triangles)."""
+    vertices = np.asarray(vertices, dtype=float)
+    d = vertices.shape[1]
+    if d == 2:
+        return mid_line_sides(points, vertices, band)
+    points = np.asarray(points, dtype=float).reshape(-1, d)
+    facets = np.asarray(facets, dtype=np.int64)
+    sides = np.zeros(len(points), np.int8)
+    border = border_edges(facets)
+    step = max(1, chunk // max(1, len(facets)))
+    for begin in range(0, len(points), step):
+        sides[begin:begin + step] = _surface_sides(points[begin:begin + step], vertices,
+                                                   facets, border, band)
+    return sides
+
+
+def _surface_sides(points, vertices, facets, border, band):
+    """:func:`mid_surface_sides` in 3D for one chunk of points; ``border`` its border edges."""
+    a, b, c = (vertices[facets[:, k]] for k in range(3))
+    distance2, height = _triangle_distance2(points, a, b, c)
+    nearest = np.argmin(distance2, axis=1)
+    rows = np.arange(len(points))
+    surface2 = distance2[rows, nearest]
+    border2 = _segment_distance2(points, vertices[border[:, 0]],
+                                 vertices[border[:, 1]]).min(axis=1)
+    # On the border when no interior point of the surface is nearer than it (rounding aside).
+    at_border = border2 <= surface2 * (1.0 + 1e-9) + 1e-30
+    beside = ~at_border & (surface2 <= band * band)
+    return np.where(beside, np.where(height[rows, nearest] > 0.0, 1, -1), 0).astype(np.int8)
+
+
 def count_crossings(previous_ids, previous_sides, ids, sides):
     """How many particles are beside the body on opposite sides now and before (ids sorted
     or not; each id at most once in each set)."""
@@ -91,7 +193,7 @@ class BodyCrossing(Observer):
         self.model = model
         body_spec = next(b for k, b in enumerate(case["body"])
                          if (b["name"] or f"body{k}") == self.body_name)
-        self.shape = (body_spec["nx"], body_spec["ny"])
+        self.shape = tuple(body_spec[key] for key in ("nx", "ny", "nz")[:case["dimension"]])
         spacing = case["particles"]["spacing"]
         thickness = (min(self.shape) - 1) * body_spec["spacing"]
         self.band = 0.5 * thickness + BAND_SPACINGS * spacing
@@ -111,14 +213,14 @@ class BodyCrossing(Observer):
     def _beside(self, particles):
         """(ids, sides) of every rank's owned fluid particles beside the body, on rank 0."""
         body = self.model.body(self.body_name)
-        mid_line = lattice_mid_line(body.position, *self.shape)
+        vertices, facets = lattice_mid_surface(body.position, self.shape)
         n = particles.n_owned
         kind = particles.kind[:n]
         position = particles.position[:n]
-        low, high = mid_line.min(axis=0) - self.band, mid_line.max(axis=0) + self.band
+        low, high = vertices.min(axis=0) - self.band, vertices.max(axis=0) + self.band
         near = np.flatnonzero(((kind == FLUID) | (kind == INFLOW)) &
                               np.all((position >= low) & (position <= high), axis=1))
-        sides = mid_line_sides(position[near], mid_line, self.band)
+        sides = mid_surface_sides(position[near], vertices, facets, self.band)
         keep = sides != 0
         gathered = self.comm.gather((particles.id[:n][near][keep].astype(np.int64),
                                      sides[keep]), root=0)

@@ -11,7 +11,7 @@ SECTIONS = {
     "check": Section({
         "kind": Key("str", choices=tuple(CHECKS),
                     doc="body_crossing: fluid particles whose path crossed a thin lattice "
-                        "body's mid-line, counted every step"),
+                        "body's mid-line (mid-surface in 3D), counted every step"),
         "body": Key("str", doc="body_crossing: the body's name"),
         "name": Key("str", "", doc="names /checks/<name> in result.h5; default "
                                    "<kind>_<body>"),
@@ -29,9 +29,12 @@ def check(case):
                             f"({', '.join(bodies) or 'it has none'})")
         body = bodies[spec["body"]]
         if spec["kind"] == "body_crossing":
-            if body["type"] != "lattice" or min(body["nx"], body["ny"]) < 2:
+            counts = [body[key] for key in ("nx", "ny", "nz")[:case["dimension"]]]
+            if body["type"] != "lattice" or min(counts) < 2:
+                least = " x ".join(["2"] * case["dimension"])
                 raise CaseError(f"{label}.body '{spec['body']}' must be a lattice of at least "
-                                f"2 x 2 nodes: its mid-line runs along its longer side")
+                                f"{least} nodes: its mid-line (mid-surface in 3D) is the mean "
+                                f"through its thinnest direction")
             if not has_fluid(case):
                 raise CaseError(f"{label} counts fluid particles, but the case has no fluid")
         spec["name"] = spec["name"] or f"{spec['kind']}_{spec['body']}"

@@ -32,7 +32,7 @@ off a node closer than collision_distance as off a wall (the node's velocity
 is the wall velocity). A node on a side with no fluid has a low number
 density and becomes a Dirichlet (P = 0) particle like a free surface, which is
 what that side is. :func:`fluid_inside` counts fluid particles inside each
-body's outline every step, so a leak would show in the diagnostics.
+body's closed boundary (its model's ``boundary``, any d) every step, so a leak would show in the diagnostics.
 """
 
 import logging
@@ -41,7 +41,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.core import operators
-from parmps.core.geometry import point_in_polygon
+from parmps.core.geometry import inside_boundary
 from parmps.core.neighbours import pair_list, rows_of
 from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID
 from parmps.errors import RunFailure
@@ -128,15 +128,23 @@ def light_bodies(density_ratio):
                      for name, ratio in light.items())
 
 
-def fluid_inside(particles, polygon, comm):
-    """How many fluid (or inflow) particles lie inside the closed ``polygon``."""
+def fluid_inside(particles, vertices, facets, comm):
+    """How many fluid (or inflow) particles lie inside the closed boundary ``facets`` (m, d)
+    of ``vertices`` (n, d): a body's, as its model gives it (``SolidModel.boundary``).
+    Collective."""
     n = particles.n_owned
     kind = particles.kind[:n]
     position = particles.position[:n]
-    low, high = polygon.min(axis=0), polygon.max(axis=0)
-    near = ((kind == FLUID) | (kind == INFLOW)) & np.all((position >= low) &
-                                                        (position <= high), axis=1)
-    local = int(np.count_nonzero(point_in_polygon(position[near], polygon)))
+    used = np.asarray(vertices)[np.unique(np.asarray(facets, dtype=np.int64))] \
+        if len(facets) else np.zeros((0, position.shape[1]))
+    local = 0
+    if len(used):
+        # Only particles in the boundary's box can be inside: the test costs
+        # particles x facets.
+        low, high = used.min(axis=0), used.max(axis=0)
+        near = ((kind == FLUID) | (kind == INFLOW)) & np.all((position >= low) &
+                                                            (position <= high), axis=1)
+        local = int(np.count_nonzero(inside_boundary(position[near], vertices, facets)))
     return comm.allreduce(local, op=MPI.SUM)
 
 
@@ -276,5 +284,5 @@ class WeakCoupling(Participant):
     def series(self, state):
         """{body name: {"fluid_inside": count}} (collective)."""
         return {body.name: {"fluid_inside": fluid_inside(state.particles,
-                                                         self.model.outline(k), self.comm)}
+                                                         *self.model.boundary(k), self.comm)}
                 for k, body in enumerate(self.model.bodies)}

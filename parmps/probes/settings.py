@@ -7,6 +7,7 @@ import numpy as np
 from parmps.config import ZERO, Key, PerDimension, Section
 from parmps.core.settings import has_fluid, snap_to_lattice
 from parmps.errors import CaseError
+from parmps.solids.mass_spring.lattice import lattice_geometry
 
 KINDS = ("pressure", "level", "force", "displacement")
 
@@ -142,11 +143,11 @@ def _check_displacement(case, label, probe):
 
 
 def rest_positions(body):
-    """A body's node positions as the case builds them (n, 2): a lattice's i + nx j."""
+    """A body's node positions as the case builds them (n, d): a lattice's i + nx j
+    (+ nx ny k), d the number of components of its ``lower``."""
     if body["type"] == "lattice":
-        i, j = np.meshgrid(np.arange(body["nx"]), np.arange(body["ny"]))
-        return np.asarray(body["lower"]) + body["spacing"] * np.column_stack(
-            [i.ravel(), j.ravel()]).astype(float)
+        shape = [body[key] for key in ("nx", "ny", "nz")[:len(body["lower"])]]
+        return lattice_geometry(shape, body["spacing"], body["lower"]).position
     return np.asarray(body["nodes"], dtype=float).reshape(-1, 2)
 
 

@@ -53,8 +53,11 @@ class SolidModel:
         """1/m of body k's particle nodes [1/kg] (0 for a node that does not move)."""
         raise NotImplementedError
 
-    def outline(self, k):
-        """Body k's material outline as a closed polygon (for counting fluid inside it)."""
+    def boundary(self, k):
+        """Body k's material boundary, closed: (vertices (n, d), facets (m, d) of indices
+        into them), facets as :meth:`surface` gives them (2D: edges of a loop; 3D: outward
+        triangles). What the coupling knows of a body's shape: it counts the fluid inside
+        with :func:`parmps.core.geometry.inside_boundary`."""
         raise NotImplementedError
 
     # -- time stepping --------------------------------------------------------------------

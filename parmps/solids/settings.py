@@ -110,12 +110,15 @@ SECTIONS = {
 
 
 def check_dimension_support(raw, dimension):
-    """Solid-only 3D cases run; bodies in a 3D case with fluid are refused in one line."""
+    """Lattice bodies are coupled to a fluid in any d; a closed shell with fluid is refused
+    in one line (its coupling, with the fluid inside it, is not written yet)."""
     particles = [name for name in PARTICLE_SECTIONS if raw.get(name)]
-    if dimension != 2 and raw.get("body") and particles:
-        raise CaseError(f"[[body]] with [{particles[0]}]: the fluid-solid coupling runs in 2D "
-                        f"cases only so far; this case is {dimension}D (domain.lower has "
-                        f"{dimension} components); a 3D case may have bodies without fluid")
+    bodies = raw.get("body") if isinstance(raw.get("body"), list) else []
+    for k, spec in enumerate(bodies):
+        if particles and isinstance(spec, dict) and spec.get("type") == "shell":
+            raise CaseError(f"body[{k}] type = \"shell\" with [{particles[0]}]: closed shells "
+                            f"are not coupled to a fluid yet; a shell runs without fluid, "
+                            f"and lattice bodies run in a fluid in 2D and 3D")
 
 
 def check(case):

@@ -459,6 +459,34 @@ def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate
             "volume_error": error, "end": end}
 
 
+def carried_body(path, case, body="box", check=None):
+    """A body carried by an inflow (validation/box_in_flow_3d/), in any dimension: its
+    largest |V - V0|/V0, the most fluid particles inside it at any step, how far its
+    centroid travelled along the first inlet's velocity (the flow's direction) by the last
+    step and across it, how far the run got and, with ``check`` (a body_crossing check's
+    name), the fluid particles that crossed the body.
+
+    Returns a dict: volume_error, fluid_inside, carried [m], across [m], end [s], steps
+    (and crossings).
+    """
+    series = solid_series(path, body)
+    centroid = np.asarray(series["centroid"])
+    flow = np.asarray(case["inlet"][0]["velocity"], dtype=float)
+    flow /= np.linalg.norm(flow)
+    travel = centroid[-1] - centroid[0]
+    along = float(travel @ flow)
+    with open_result(path) as result:
+        time = result.diagnostics["time"]
+        total = result.checks[check]["total"] if check else None
+    measured = {"volume_error": float(np.abs(series["volume_error"]).max()),
+                "fluid_inside": int(np.max(series["fluid_inside"])),
+                "carried": along, "across": float(np.linalg.norm(travel - along * flow)),
+                "end": float(time[-1]), "steps": int(len(time))}
+    if check:
+        measured["crossings"] = int(total[-1]) if len(total) else 0
+    return measured
+
+
 def lattice_area(body):
     """Area [m^2 per unit depth] of the fluid a lattice body displaces: one l0^2 per node."""
     return body["nx"] * body["ny"] * body["spacing"] ** 2

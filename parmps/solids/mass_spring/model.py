@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError, RunFailure
-from parmps.solids.mass_spring.body import substep_count
+from parmps.solids.mass_spring.body import boundary_facets, substep_count
 from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.model import SolidModel
 
@@ -139,9 +139,11 @@ class MassSpringModel(SolidModel):
         body = self.bodies[k]
         return body.inverse_mass[:body.n_material]
 
-    def outline(self, k):
+    def boundary(self, k):
+        # The material's own outline: a body closed over anchors on a wall (2D) counts
+        # the fluid inside its material, not between it and the wall.
         body = self.bodies[k]
-        return body.position[body.outline]
+        return body.position, boundary_facets(body.outline)
 
     def kinetic_energy(self):
         return sum(body.energy()[0] for body in self.bodies)
