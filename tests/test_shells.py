@@ -10,6 +10,7 @@ import pytest
 import parmps
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, schema, validation
+from parmps.core.geometry import winding_number
 from parmps.errors import CaseError
 from parmps.solids.mass_spring import shell
 from parmps.solids.mass_spring.model import MassSpringModel
@@ -383,7 +384,7 @@ def test_fill_points_inside_and_the_winding_number_agree(make, spacing):
     # The same rays: the same answer, points on the surface included.
     assert np.array_equal(np.sort(np.round(points / spacing).astype(int), axis=0),
                           np.sort(np.round(grid[inside] / spacing).astype(int), axis=0))
-    winding = shell.winding_number(grid, vertices, triangles)
+    winding = winding_number(grid, vertices, triangles)
     # Off the surface the winding number is 0 or 1 to rounding; on it, about 1/2.
     clear = np.abs(winding - np.round(winding)) < 0.4
     assert clear.sum() > 0.98 * len(grid) and 0 < inside.sum() < len(grid)
@@ -396,7 +397,7 @@ def test_points_inside_random_points_against_the_winding_number():
     lower, upper = vertices.min(axis=0) - 0.5, vertices.max(axis=0) + 0.5
     points = rng.uniform(lower, upper, size=(4000, 3))
     inside = shell.points_inside(points, vertices, triangles)
-    winding = shell.winding_number(points, vertices, triangles)
+    winding = winding_number(points, vertices, triangles)
     assert np.all(np.abs(winding - np.round(winding)) < 1e-6)
     assert np.array_equal(inside, np.round(winding) == 1)
     assert 0.1 < inside.mean() < 0.9
@@ -412,7 +413,7 @@ def test_the_winding_number_on_the_surface_is_the_share_of_directions_inside():
     triangles = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
     points = np.array([[0.5, 0.5, 1.0], [0.5, 0.0, 0.0], [1.0, 1.0, 1.0], [0.5, 0.5, 0.5],
                        [0.5, 0.5, 1.5]])
-    assert shell.winding_number(points, cube, triangles) == pytest.approx(
+    assert winding_number(points, cube, triangles) == pytest.approx(
         [0.5, 0.25, 0.125, 1.0, 0.0], abs=1e-12)
 
 

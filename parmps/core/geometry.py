@@ -46,7 +46,11 @@ def winding_number(points, vertices, triangles, chunk=200_000):
         det = np.einsum("...i,...i", a, np.cross(b, c))
         den = (la * lb * lc + np.einsum("...i,...i", a, b) * lc
                + np.einsum("...i,...i", b, c) * la + np.einsum("...i,...i", c, a) * lb)
-        out[begin:begin + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+        # A point in a triangle's plane sees it edge-on: its solid angle jumps from
+        # +2 pi to -2 pi across the triangle; take the mean of the two, 0 (not the
+        # +2 pi atan2 gives), so a point on the surface has winding number 1/2.
+        angle = np.where(det == 0.0, 0.0, np.arctan2(det, den))
+        out[begin:begin + step] = angle.sum(axis=1) / (2.0 * np.pi)
     return out
 
 

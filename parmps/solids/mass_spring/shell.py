@@ -525,31 +525,6 @@ def read_mesh(path, source=None):
 # Inside the surface
 
 
-def winding_number(points, vertices, triangles, chunk=200_000):
-    """Generalised winding number of a closed surface at every point: 1 inside,
-    0 outside (Jacobson et al. 2013), from the solid angle of every triangle
-    (Van Oosterom & Strackee 1983). Cost: points x triangles, in chunks of about
-    ``chunk`` pairs."""
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    corners = vertices[triangles]                                  # (m, 3, 3)
-    out = np.empty(len(points))
-    step = max(1, chunk // max(1, len(triangles)))
-    for begin in range(0, len(points), step):
-        p = points[begin:begin + step, None, None, :]
-        r = corners[None, :, :, :] - p                             # (k, m, 3, 3)
-        a, b, c = r[..., 0, :], r[..., 1, :], r[..., 2, :]
-        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-        det = np.einsum("...i,...i", a, np.cross(b, c))
-        den = (la * lb * lc + np.einsum("...i,...i", a, b) * lc
-               + np.einsum("...i,...i", b, c) * la + np.einsum("...i,...i", c, a) * lb)
-        # A point in a triangle's plane sees it edge-on: its solid angle jumps from
-        # +2 pi to -2 pi across the triangle; take the mean of the two, 0 (not the
-        # +2 pi atan2 gives), so a point on the surface has winding number 1/2.
-        angle = np.where(det == 0.0, 0.0, np.arctan2(det, den))
-        out[begin:begin + step] = angle.sum(axis=1) / (2.0 * np.pi)
-    return out
-
-
 def _edge_side(p, low, high):
     """orient2d(p, low, high) with p moved by (eps, eps^2): never 0 unless the edge
     projects to a point. Both triangles on an edge evaluate it with the same
