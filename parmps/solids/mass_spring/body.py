@@ -146,7 +146,7 @@ def area_multiplier(phi, gradient, velocity, inverse_mass, force, dt):
 
 
 def volume_multiplier(position, facets, rest_volume, velocity, inverse_mass, force, dt,
-                      tolerance=0.0, iterations=0):
+                      tolerance=0.0, iterations=0, kick=1.0):
     """The multiplier that puts the next substep's boundary on its rest volume.
 
     Arrays on the boundary nodes: ``position``, ``velocity`` (the half-step
@@ -160,7 +160,14 @@ def volume_multiplier(position, facets, rest_volume, velocity, inverse_mass, for
     predicted one: each step then shrinks the error by about the step's
     displacement over the body's size, and needs the volume alone. Returns
     (lambda, gradV (s, d), the Newton steps taken).
+
+    ``kick``: the share of dt^2 M^-1 F the next position takes: 1 inside the Verlet
+    loop (``velocity`` is then the half-step velocity, and the next drift carries two
+    half kicks), 1/2 at a body's very first evaluation, where ``velocity`` is the
+    initial one and the first substep moves x + dt v + dt^2/2 a. Eq. 12 for that
+    prediction is eq. 12 with dt sqrt(kick) and v / sqrt(kick).
     """
+    dt, velocity = dt * math.sqrt(kick), velocity / math.sqrt(kick)
     gradient = volume_gradient(position, facets)
     phi = enclosed_volume(position, facets) - rest_volume
     multiplier = area_multiplier(phi, gradient, velocity, inverse_mass, force, dt)
@@ -345,8 +352,9 @@ class Body:
             force = force + np.tensordot(factor, self.load_field, axes=1)
         return force
 
-    def acceleration_at(self, time, velocity, dt):
-        """M^-1 (F - gradPhi lambda) at the current positions, for a step of length dt."""
+    def acceleration_at(self, time, velocity, dt, kick=1.0):
+        """M^-1 (F - gradPhi lambda) at the current positions, for a step of length dt
+        (``kick``: see :func:`volume_multiplier`)."""
         force = self.external_force(time)
         network_forces(self.position, velocity, self.springs, self.rest_length, self.stiffness,
                        self.damping, self.axial_damping, force)
@@ -355,7 +363,7 @@ class Body:
             self.multiplier, gradient, steps = volume_multiplier(
                 self.position[nodes], self.surface_facets, self.rest_volume, velocity[nodes],
                 self.inverse_mass[nodes], force[nodes], dt, self.constraint_tolerance,
-                self.constraint_iterations)
+                self.constraint_iterations, kick)
             self.newton_steps = max(self.newton_steps, steps)
             # surface_nodes are unique, so plain fancy-index subtraction is safe.
             force[nodes] -= gradient * self.multiplier
@@ -366,7 +374,8 @@ class Body:
         n_sub = substep_count(dt_outer, dt_sub)
         h = dt_outer / n_sub
         if self.acceleration is None:
-            self.acceleration = self.acceleration_at(time, self.velocity, h)
+            # The first substep drifts by h v + h^2/2 a from the initial velocity.
+            self.acceleration = self.acceleration_at(time, self.velocity, h, kick=0.5)
         position, velocity = self.position, self.velocity
         self.newton_steps = 0
         # Gravity and the fluid force are held over the step.
