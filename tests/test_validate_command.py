@@ -94,16 +94,16 @@ def test_a_judge_table_reaches_into_a_nested_metric():
 
 
 def test_cases_runs_each_case_to_its_end_on_each_rank_count(tmp_path):
-    """--cases, the one command of every case to its end: here the 7x7 pair to 0.05 s on 1
+    """--cases, the one command of every case to its end: here the 7x7x7 pair to 0.05 s on 1
     and 2 ranks (the full runs are in the closing notes: `validate --cases --all`)."""
-    result = run_parmps(["validate", "--cases", "--case-glob", "mass_spring_7x7*",
+    result = run_parmps(["validate", "--cases", "--case-glob", "mass_spring_7x7x7*",
                          "--case-ranks", "1", "2", "--end-time", "0.05", "-o", tmp_path],
                         timeout=300)
     assert result.returncode == 0, result.stderr
     lines = [json.loads(text) for text in result.stdout.splitlines() if text.startswith("{")]
     assert [(line["case"], line["ranks"]) for line in lines] == [
-        ("cases/mass_spring_7x7.toml", 1), ("cases/mass_spring_7x7.toml", 2),
-        ("cases/mass_spring_7x7_free.toml", 1), ("cases/mass_spring_7x7_free.toml", 2)]
+        ("cases/mass_spring_7x7x7.toml", 1), ("cases/mass_spring_7x7x7.toml", 2),
+        ("cases/mass_spring_7x7x7_free.toml", 1), ("cases/mass_spring_7x7x7_free.toml", 2)]
     for line in lines:
         assert line["passed"] and line["outcome"] == "ran to the end"
         assert line["end_time"] == 0.05 and line["reached"] == pytest.approx(0.05)
