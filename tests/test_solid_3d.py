@@ -13,7 +13,7 @@ import pytest
 
 from parmps import config, open_result, schema, validation
 from parmps.errors import CaseError
-from parmps.solids.mass_spring.body import (Body, damping_forces, loop_facets, spring_forces,
+from parmps.solids.mass_spring.body import (Body, boundary_facets, damping_forces, spring_forces,
                                             volume_multiplier)
 from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.mass_spring.kernels import held_force_substeps, network_forces
@@ -25,15 +25,11 @@ from test_solid import load_case, run
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def facets_of(boundary):
-    return loop_facets(boundary) if boundary.ndim == 1 else boundary
-
-
 def perturbed_lattice(shape, seed, amplitude=0.2, spacing=0.1, lower=(1.0, -2.0, 0.5)):
     position, springs, kind, boundary = lattice_geometry(shape, spacing, lower)
     rng = np.random.default_rng(seed)
     position = position + amplitude * spacing * rng.uniform(-1, 1, position.shape)
-    return position, springs, facets_of(boundary)
+    return position, springs, boundary_facets(boundary)
 
 
 # ---------------------------------------------------------------------------
@@ -405,7 +401,7 @@ def test_the_first_substep_from_rest_keeps_the_volume(n):
     h^2 a of the Verlet loop's later ones, and the multiplier predicts exactly that."""
     shape = (5,) * n
     position, springs, _, boundary = lattice_geometry(shape, 0.01, (0.0,) * n)
-    facets = boundary if n == 3 else facets_of(boundary)
+    facets = boundary_facets(boundary)
     body = Body("block", position, np.zeros_like(position), 0.01, springs, 1000.0, 0.0,
                 boundary, volume_constraint=True)
     body.constraint_iterations, body.constraint_tolerance = 8, 1e-13

@@ -32,7 +32,8 @@ off a node closer than collision_distance as off a wall (the node's velocity
 is the wall velocity). A node on a side with no fluid has a low number
 density and becomes a Dirichlet (P = 0) particle like a free surface, which is
 what that side is. :func:`fluid_inside` counts fluid particles inside each
-body's closed boundary (its model's ``boundary``, any d) every step, so a leak would show in the diagnostics.
+body's closed boundary (its model's ``boundary``, any d) every step, so a leak
+would show in the diagnostics.
 """
 
 import logging

@@ -379,6 +379,7 @@ def cantilever_period(path, case, body="beam", settle_time=0.0):
     (relative), ``mean_deflection`` and the series ``time`` and ``series``.
     """
     from parmps.solids.mass_spring.elastic import REPRESENTABLE_POISSON, plane_modulus
+    from parmps.tools.cantilever import FIRST_ROOT
 
     (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
     shape = [spec["nx"], spec["ny"]] + ([spec["nz"]] if spec.get("nz") else [])
@@ -394,7 +395,7 @@ def cantilever_period(path, case, body="beam", settle_time=0.0):
         modulus, _ = plane_modulus(spec["youngs_modulus"], poisson, spec["plane"])
     bending = modulus * width * depth ** 3 / 12.0
     line_mass = spec["density"] * width * depth
-    omega = 1.8751040687119611 ** 2 * math.sqrt(bending / (line_mass * length ** 4))
+    omega = FIRST_ROOT ** 2 * math.sqrt(bending / (line_mass * length ** 4))
     with open_result(path) as result:
         times = np.asarray(result.frames.times)
         rest = result.frames[0].bodies[body]["position"]

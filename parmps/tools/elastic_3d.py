@@ -29,10 +29,10 @@ from parmps import config, schema
 from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.mass_spring.elastic import elastic_lattice
 from parmps.solids.mass_spring.lattice import lattice_geometry
-from parmps.solids.mass_spring.statics import (lowest_frequencies, static_displacement,
-                                               stiffness_matrix)
+from parmps.solids.mass_spring.statics import (body_static_displacement, lowest_frequencies,
+                                               static_displacement, stiffness_matrix)
+from parmps.tools.cantilever import FIRST_ROOT, tip_nodes
 
-FIRST_ROOT = 1.8751040687119611  # cos(bL) cosh(bL) = -1, clamped-free beam
 KIRCHHOFF_CLAMPED_SQUARE = 0.00126  # w D / (q a^4) at the centre (Timoshenko & Woinowsky-Krieger)
 LATTICE_POISSON = 0.25
 
@@ -96,16 +96,10 @@ def beam_theory(slenderness):
             "omega": FIRST_ROOT ** 2 * math.sqrt(bending / (line_mass * length ** 4))}
 
 
-def tip_nodes(body):
-    return np.flatnonzero(np.isclose(body.position[:, 0], body.position[:, 0].max()))
-
-
 def static_tip_deflection(nodes, slenderness, tip_load=0.0, gravity=0.0):
     """Downward deflection of the tip (mean over the right face's nodes) [m]."""
     body = cantilever_body(nodes, slenderness, tip_load, gravity)
-    matrix = stiffness_matrix(body.position, body.springs, body.stiffness)
-    displacement, _ = static_displacement(matrix, body.external_force(0.0), body.pinned)
-    return -float(displacement[tip_nodes(body), 2].mean())
+    return -float(body_static_displacement(body)[tip_nodes(body), 2].mean())
 
 
 def first_frequency(nodes, slenderness):

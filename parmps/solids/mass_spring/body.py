@@ -318,7 +318,7 @@ class Body:
         return enclosed_volume(self.position[self.surface_nodes], self.surface_facets)
 
     def volume_error(self):
-        """(V - V0)/V0 of the boundary polygon (0 for a body without one)."""
+        """(V - V0)/V0 of the enclosed volume (0 for a body without a boundary)."""
         if self.rest_volume == 0.0:
             return 0.0
         return (self.volume() - self.rest_volume) / self.rest_volume
