@@ -326,6 +326,22 @@ def test_sort_row_columns_sorts_each_row_with_its_values():
     np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
 
 
+def test_split_owned_columns_gives_petsc_both_blocks_in_row_order():
+    # Rows 0-2 of a rank owning global columns 10-13; the other columns stay global.
+    row_ptr = np.array([0, 3, 3, 7], np.int32)
+    columns = np.array([2, 10, 13, 10, 11, 14, 20], np.int32)
+    values = np.arange(7.0)
+    (owned_ptr, owned_columns, owned_values), (other_ptr, other_columns, other_values) = \
+        kernels.split_owned_columns(row_ptr, columns, values, np.int32(10), 4)
+    np.testing.assert_array_equal(owned_ptr, [0, 2, 2, 4])
+    np.testing.assert_array_equal(owned_columns, [0, 3, 0, 1])
+    np.testing.assert_array_equal(owned_values, [1.0, 2.0, 3.0, 4.0])
+    np.testing.assert_array_equal(other_ptr, [0, 1, 1, 3])
+    np.testing.assert_array_equal(other_columns, [2, 14, 20])
+    np.testing.assert_array_equal(other_values, [0.0, 5.0, 6.0])
+    assert owned_ptr.dtype == row_ptr.dtype and owned_columns.dtype == columns.dtype
+
+
 def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are_identical(
         scene):
     position, velocity, pressure, is_dummy, n, indptr, cols, _ = scene

@@ -235,6 +235,13 @@ class PressureSolver:
         return (f"KSP {self.ksp.getType()} + PC {self.ksp.getPC().getType()}, "
                 f"rtol {self.ksp.getTolerances()[0]:g}")
 
+    def setup_due(self):
+        """Whether the next solve sets its preconditioner up afresh; the same on every rank
+        (the rule reads iteration counts, not timings)."""
+        return self.fresh_iterations is None or not keep_preconditioner(
+            self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
+            self.setup_cost, self.reuse_limit)
+
     def solve(self, indptr, columns, values, rhs, guess, step):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
@@ -249,6 +256,9 @@ class PressureSolver:
         csr = (indptr.astype(index_type), columns.astype(index_type),
                values.astype(PETSc.ScalarType))
         kernels.sort_row_columns(*csr)
+        if self.comm.size > 1:
+            first = self.comm.exscan(n_local) or 0
+            csr = kernels.split_owned_columns(*csr, index_type(first), n_local)
         matrix = PETSc.Mat().createAIJWithArrays(
             size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr,
             comm=self.comm)
@@ -266,10 +276,7 @@ class PressureSolver:
             self.ksp = self._make_ksp()
             self.sizes = matrix.getSizes()
             self.fresh_iterations = None
-        reuse = (self.fresh_iterations is not None
-                 and keep_preconditioner(self.preconditioner_age, self.iterations_since_setup,
-                                         self.last_iterations, self.setup_cost,
-                                         self.reuse_limit))
+        reuse = not self.setup_due()
         self.ksp.getPC().setReusePreconditioner(reuse)
         self.ksp.setOperators(matrix)
         # The first solve sets the preconditioner up, which reads the rest of the options.

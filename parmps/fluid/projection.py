@@ -111,6 +111,11 @@ class FluidSolver:
         self.last_residual = 0.0
         self.expected_pairs = 0
 
+    def rows_may_move(self):
+        """Whether this step's pressure rows may change ranks at no extra cost: the solve
+        sets its preconditioner up afresh anyway (a new row layout forces a set-up)."""
+        return self.pressure_solver is not None and self.pressure_solver.setup_due()
+
     # The explicit part and the correction move fluid particles only.
     @staticmethod
     def moving(kind):

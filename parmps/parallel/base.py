@@ -14,9 +14,10 @@ Contract shared by every implementation:
 - ``distribute(particles)``: from the global scene (the same on every rank)
   keep the particles this rank owns; raises CaseError on every rank for a
   layout too fine for the halo.
-- ``migrate(particles)``: drop ghosts, send owned particles that left this
-  rank's region to their owners (lazily: see ``parallel.migration_margin``);
-  returns owned-only Particles in ascending global id.
+- ``migrate(particles, eager=False)``: drop ghosts, send owned particles that
+  left this rank's region to their owners (lazily: see
+  ``parallel.migration_margin``; ``eager`` moves every one outside its region at
+  once); returns owned-only Particles in ascending global id.
 - ``build_halo(particles)``: owned particles followed by ghosts (copies of the
   particles of other ranks within the halo width of this rank's region); it
   remembers what it sent, so ``refresh`` updates the same ghosts.
@@ -28,7 +29,8 @@ Contract shared by every implementation:
   positions (local, not collective; every position has exactly one owner).
 - ``box(rank)``: the region a rank owns, as a box (local).
 - ``neighbours``: the ranks this rank exchanges ghosts with (local).
-- ``update(particles, step)``: migrate, rebalance, build the halo, in that order.
+- ``update(particles, step, eager=False)``: migrate, rebalance, build the halo, in
+  that order.
 
 Global ids never change and owned particles are kept in ascending id, so the
 results do not depend on the decomposition or the rank count beyond round-off.
@@ -87,8 +89,10 @@ class Decomposition(abc.ABC):
         """Keep this rank's particles of the global scene (identical on every rank)."""
 
     @abc.abstractmethod
-    def migrate(self, particles):
-        """Drop ghosts, send owned particles that left to their owners; owned-only, by id."""
+    def migrate(self, particles, eager=False):
+        """Drop ghosts, send owned particles that left to their owners; owned-only, by id.
+        Lazily, once one is past the margin; ``eager``: now (collective, so any rank's
+        ``eager`` moves them on every rank)."""
 
     @abc.abstractmethod
     def build_halo(self, particles):
@@ -136,10 +140,15 @@ class Decomposition(abc.ABC):
 
     # -- shared -------------------------------------------------------------------------------
 
-    def update(self, particles, step):
+    def update(self, particles, step, eager=False):
         """Everything positions changed since the last step: migrate, rebalance when due,
-        then rebuild the halo. Returns owned particles followed by current ghosts."""
-        particles = self.migrate(particles)
+        then rebuild the halo. Returns owned particles followed by current ghosts.
+
+        ``eager``: migrate every particle outside its region, not only once one is past
+        the margin. The caller says when a new layout of its rows costs nothing extra
+        (the pressure preconditioner is set up afresh this step anyway), so the migrations
+        the margin would force later, each with a set-up of its own, come less often."""
+        particles = self.migrate(particles, eager)
         particles = self.rebalance(particles, step)
         return self.build_halo(particles)
 

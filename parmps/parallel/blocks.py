@@ -229,10 +229,10 @@ class BlockDecomposition(Decomposition):
 
     # -- migration ------------------------------------------------------------------------------
 
-    def migrate(self, particles):
+    def migrate(self, particles, eager=False):
         """Drop ghosts; send owned particles that left this block to their owners (lazily
-        with a margin); owned-only in ascending id."""
-        return self._timed("migration_seconds", self._migrate, particles)
+        with a margin, unless ``eager``); owned-only in ascending id."""
+        return self._timed("migration_seconds", self._migrate, particles, eager)
 
     def _migrate(self, particles, force=False):
         n = particles.n_owned

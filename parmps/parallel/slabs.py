@@ -194,17 +194,17 @@ class SlabDecomposition(Decomposition):
 
     # -- migration ------------------------------------------------------------------------------
 
-    def migrate(self, particles):
+    def migrate(self, particles, eager=False):
         """Drop ghosts; send owned particles that left this slab to their owners.
 
         With a migration margin, nothing moves until some particle on some rank
-        is more than the margin outside its slab; then every particle outside
-        its slab moves. Handles jumps over any number of slabs. Returns
+        is more than the margin outside its slab (or ``eager``); then every particle
+        outside its slab moves. Handles jumps over any number of slabs. Returns
         owned-only Particles in ascending global id.
         """
         start = time.perf_counter()
         try:
-            return self._migrate(particles)
+            return self._migrate(particles, force=eager)
         finally:
             self.migration_seconds += time.perf_counter() - start
 

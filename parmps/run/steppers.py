@@ -107,7 +107,8 @@ class FluidStepper:
             participant.before_exchange(particles, time, dt)
         timers = self.fluid.timers
         timers.start("halo")
-        particles = self.decomposition.update(particles, step)
+        particles = self.decomposition.update(particles, step,
+                                              eager=self.fluid.rows_may_move())
         timers.stop()
         dirichlet = None
         for participant in self.participants:

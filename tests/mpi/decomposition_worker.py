@@ -573,12 +573,31 @@ def check_lazy_migration(comm, setup):
     check_ownership(comm, decomposition, mine, 2000, "lazy migration")
 
 
+def check_eager_migration(comm, setup):
+    """``eager`` migrates the strays within the margin at once, on every rank when one
+    rank asks (the pressure solver asks when its preconditioner is due anyway)."""
+    margin = 0.5
+    global_scene = random_scene(2000, 40.0, seed=10, setup=setup)
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 40.0, setup, migration_margin=margin))
+    mine = decomposition.distribute(global_scene)
+    position = global_scene.position + np.where(global_scene.id % 2 == 0, 0.45, -0.45)[:, None]
+    mine.position[:] = position[mine.id]
+    mine = decomposition.migrate(decomposition.build_halo(mine), eager=comm.rank == 0)
+    if comm.size > 1:
+        assert_all(comm, decomposition.migration_count == 1, "eager: no migration")
+    assert_all(comm, np.all(decomposition.owner(mine.position) == comm.rank),
+               "eager: strays left within the margin")
+    check_ownership(comm, decomposition, mine, 2000, "eager migration")
+
+
 # Checks of one decomposition through its interface, run for every set-up.
 GENERIC = {
     "halo": check_halo,
     "refresh": check_refresh,
     "migrate": check_migrate,
     "lazy_migration": check_lazy_migration,
+    "eager_migration": check_eager_migration,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
     "refusals": check_refusals,
