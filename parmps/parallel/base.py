@@ -43,6 +43,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
+from parmps.core.particles import DUMMY, KIND_NAMES, WALL
 from parmps.core.settings import search_radius
 from parmps.parallel.exchange import imbalance_of, sorted_by_id
 
@@ -73,6 +74,10 @@ class Decomposition(abc.ABC):
         self.halo_width = self.reach + self.margin
         # Regions at least this wide get their ghosts from adjacent regions only.
         self.min_width = self.reach + 2.0 * self.margin
+        # Balance is by work, not count: each particle weighs its kind's cost.
+        self.kind_weight = np.ones(max(KIND_NAMES) + 1)
+        self.kind_weight[WALL] = parallel["wall_weight"]
+        self.kind_weight[DUMMY] = parallel["dummy_weight"]
         self.rebalance_interval = int(parallel["rebalance_interval"])
         self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
         self.halo_seconds = 0.0
@@ -158,9 +163,20 @@ class Decomposition(abc.ABC):
         self.comm.Allgather(np.array([particles.n_owned], np.int64), counts)
         return counts
 
+    def weights(self, particles):
+        """The load-balance weight of each owned particle (local)."""
+        return self.kind_weight[particles.kind[:particles.n_owned]]
+
+    def loads(self, particles):
+        """Owned work of every rank, the particles weighted by kind (the same on every
+        rank)."""
+        loads = np.empty(self.size)
+        self.comm.Allgather(np.array([self.weights(particles).sum()]), loads)
+        return loads
+
     def imbalance(self, particles):
-        """Largest rank's owned count over the mean (1.0 is perfect balance)."""
-        return imbalance_of(self.counts(particles))
+        """Largest rank's owned work over the mean (1.0 is perfect balance)."""
+        return imbalance_of(self.loads(particles))
 
     def _keep_owned(self, particles, owner_rank):
         """The scene's particles whose ``owner_rank`` is this rank, in ascending id, with the
@@ -184,10 +200,10 @@ class Decomposition(abc.ABC):
                              f"got {position.shape}")
         return position
 
-    def _rebalance_reason(self, counts, step):
+    def _rebalance_reason(self, loads, step):
         """Why to rebalance now (a phrase for the log), or None; updates the drift reference.
 
-        The load (max/mean owned count) is checked at every step: above
+        The load (max/mean owned work) is checked at every step: above
         ``imbalance_tolerance`` the regions are rebalanced at once (unless the
         last attempt was refused, then only every interval). Every
         ``rebalance_interval`` steps the drift of the load is also projected one
@@ -195,7 +211,7 @@ class Decomposition(abc.ABC):
         before it gets there.
         """
         tolerance = self.imbalance_tolerance
-        before = imbalance_of(counts)
+        before = imbalance_of(loads)
         periodic = step % self.rebalance_interval == 0
         reason = None
         if before > tolerance and (periodic or not self._refused):

@@ -49,6 +49,7 @@ from mpi4py import MPI
 
 from parmps.core.particles import FIELDS, Particles
 from parmps.errors import CaseError
+from parmps.parallel.balance import gap_quantiles, histogram_quantiles
 from parmps.parallel.base import Decomposition
 from parmps.parallel.exchange import (exchange, field_arrays, imbalance_of, merge_by_id, pack,
                                       send_to_ranks, sorted_by_id, unpack_into, unpack_new)
@@ -60,7 +61,6 @@ _WIDTH_RULE = ("(mps.re_laplacian + parallel.halo_skin + 2 x parallel.migration_
                "particles.spacing")
 _AXES = "xyz"
 # Coarse and fine bins of the two-level parallel histograms of rebalance.
-_HISTOGRAM_BINS = 1024
 
 
 class BlockDecomposition(Decomposition):
@@ -193,7 +193,7 @@ class BlockDecomposition(Decomposition):
         layout = None
         if self.rank == 0:
             grid = self._scene_grid(position)
-            layout = grid, self._exact_cuts(position, grid)
+            layout = grid, self._exact_cuts(position, self.weights(particles), grid)
         grid, cuts = self.comm.bcast(layout, root=0)
         self._set_grid(grid)
         thin = self._thin_block(cuts)
@@ -212,16 +212,19 @@ class BlockDecomposition(Decomposition):
                  self.rank, imbalance)
         return mine
 
-    def _exact_cuts(self, position, grid):
-        """Nested cuts at the gaps nearest the quantiles of each group's sorted coordinates."""
+    def _exact_cuts(self, position, weights, grid):
+        """Nested cuts at the gaps nearest the quantiles of each group's sorted coordinates,
+        weighted by work."""
         cuts = []
         group = np.zeros(len(position), np.int64)
         for k, g in enumerate(grid):
             groups = int(np.prod(grid[:k], dtype=np.int64))
             level = np.empty((groups, g + 1))
             for index in range(groups):
-                values = np.sort(position[group == index, k], kind="stable")
-                level[index] = gap_quantiles(values, g, self.lower[k], self.upper[k])
+                values = position[group == index, k]
+                order = np.argsort(values, kind="stable")
+                level[index] = gap_quantiles(values[order], g, self.lower[k], self.upper[k],
+                                             weights[group == index][order])
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)
@@ -356,13 +359,14 @@ class BlockDecomposition(Decomposition):
         return self._timed("migration_seconds", self._rebalance, owned, step)
 
     def _rebalance(self, particles, step):
-        counts = self.counts(particles)
-        before = imbalance_of(counts)
+        loads = self.loads(particles)
+        before = imbalance_of(loads)
         periodic = step % self.rebalance_interval == 0
-        reason = self._rebalance_reason(counts, step)
+        reason = self._rebalance_reason(loads, step)
         if reason is None:
             return particles
-        cuts = self._histogram_cuts(particles.position[:particles.n_owned])
+        cuts = self._histogram_cuts(particles.position[:particles.n_owned],
+                                    self.weights(particles))
         thin = self._thin_block(cuts)
         if thin is not None:
             if self.rank == 0 and (periodic or not self._refused):
@@ -383,85 +387,18 @@ class BlockDecomposition(Decomposition):
                  "rank %d", step, before, reason, after, len(self._neighbours), self.rank)
         return result
 
-    def _histogram_cuts(self, position):
-        """New nested cuts, axis by axis: per group, the quantiles of an allreduced coarse
-        histogram refined by a second one (collective; the same cuts on every rank)."""
-        position = position[np.all(np.isfinite(position), axis=1)]
+    def _histogram_cuts(self, position, weights):
+        """New nested cuts, axis by axis: per group, the quantiles of work over an allreduced
+        coarse histogram refined by a second one (collective; the same cuts on every rank)."""
+        finite = np.all(np.isfinite(position), axis=1)
+        position, weights = position[finite], weights[finite]
         cuts = []
         group = np.zeros(len(position), np.int64)
         for k, g in enumerate(self.grid):
             groups = int(np.prod(self.grid[:k], dtype=np.int64))
-            level = histogram_quantiles(self.comm, position[:, k], group, groups, g,
+            level = histogram_quantiles(self.comm, position[:, k], weights, group, groups, g,
                                         self.cuts[k])
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)
         return cuts
-
-
-def gap_quantiles(values, parts, lower, upper):
-    """``parts + 1`` cuts of sorted ``values``: the bounds, then the gaps between distinct
-    values nearest the count quantiles (lattice columns stay whole)."""
-    cuts = np.empty(parts + 1)
-    cuts[0], cuts[-1] = lower, upper
-    n = len(values)
-    if parts == 1:
-        return cuts
-    if n < 2:
-        cuts[1:-1] = np.linspace(lower, upper, parts + 1)[1:-1]
-        return cuts
-    gaps = np.flatnonzero(values[1:] > values[:-1]) + 1
-    for i in range(1, parts):
-        target = i * n / parts
-        if len(gaps) == 0:  # every value the same: no split is possible
-            cuts[i] = values[0]
-            continue
-        j = np.searchsorted(gaps, target)
-        candidates = (gaps[max(j - 1, 0)], gaps[min(j, len(gaps) - 1)])
-        k = min(candidates, key=lambda gap: (abs(gap - target), gap))
-        cuts[i] = 0.5 * (values[k - 1] + values[k])
-    return cuts
-
-
-def histogram_quantiles(comm, x, group, groups, parts, old):
-    """Per group, ``parts + 1`` cuts of x at the count quantiles of the group's particles
-    over all ranks (collective). ``old``: the current cuts, kept for a group with no
-    particles or a single x."""
-    nb = _HISTOGRAM_BINS
-    bounds = np.full((groups, 2), -np.inf)
-    np.maximum.at(bounds[:, 0], group, -x)
-    np.maximum.at(bounds[:, 1], group, x)
-    comm.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
-    x_min, x_max = -bounds[:, 0], bounds[:, 1]
-    usable = x_max > x_min
-    width = np.where(usable, (x_max - x_min) / nb, 1.0)
-    coarse_index = np.clip(((x - x_min[group]) / width[group]).astype(np.int64), 0, nb - 1)
-    coarse = np.bincount(group * nb + coarse_index, minlength=groups * nb).reshape(groups, nb)
-    comm.Allreduce(MPI.IN_PLACE, coarse, op=MPI.SUM)
-    cumulative = np.concatenate([np.zeros((groups, 1), np.int64), np.cumsum(coarse, axis=1)],
-                                axis=1)
-    targets = cumulative[:, -1:] * (np.arange(1, parts) / parts)
-    bins = np.empty((groups, parts - 1), np.int64)
-    for index in range(groups):
-        found = np.searchsorted(cumulative[index], targets[index], side="right") - 1
-        bins[index] = np.clip(found, 0, nb - 1)
-    # Refine each target's coarse bin into nb sub-bins (one allreduce for all).
-    fine = np.zeros((groups, parts - 1, nb), np.int64)
-    fine_width = width / nb
-    for index in range(groups):
-        mine = group == index
-        for row, b in enumerate(bins[index]):
-            inside = mine & (coarse_index == b)
-            start = x_min[index] + b * width[index]
-            sub = np.clip(((x[inside] - start) / fine_width[index]).astype(np.int64), 0, nb - 1)
-            fine[index, row] = np.bincount(sub, minlength=nb)
-    comm.Allreduce(MPI.IN_PLACE, fine, op=MPI.SUM)
-    cuts = old.copy()
-    for index in range(groups):
-        if not usable[index]:
-            continue
-        for row, (b, target) in enumerate(zip(bins[index], targets[index])):
-            below = cumulative[index, b] + np.concatenate([[0], np.cumsum(fine[index, row])])
-            j = int(np.argmin(np.abs(below - target)))
-            cuts[index, row + 1] = x_min[index] + b * width[index] + j * fine_width[index]
-    return cuts

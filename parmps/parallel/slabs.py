@@ -52,6 +52,7 @@ from mpi4py import MPI
 
 from parmps.errors import CaseError
 from parmps.core.particles import FIELDS, Particles
+from parmps.parallel.balance import gap_quantiles
 from parmps.parallel.base import Decomposition
 from parmps.parallel.exchange import (field_arrays, imbalance_of, merge_by_id, pack,
                                       send_to_ranks, sorted_by_id, unpack_into, unpack_new)
@@ -147,14 +148,15 @@ class SlabDecomposition(Decomposition):
     def distribute(self, particles):
         """From the global scene (identical on every rank) keep this rank's particles.
 
-        The edges go between the lattice columns nearest the x quantiles, so the
-        counts are even up to a column. Raises CaseError on every rank if an
-        interior slab would be thinner than the halo.
+        The edges go between the lattice columns nearest the quantiles of x weighted
+        by work (:meth:`weights`), so the loads are even up to a column. Raises
+        CaseError on every rank if an interior slab would be thinner than the halo.
         """
         x = particles.position[:particles.n_owned, 0]
         edges = None
         if self.rank == 0:
-            edges = self._quantile_edges(np.sort(x, kind="stable"))
+            order = np.argsort(x, kind="stable")
+            edges = self._quantile_edges(x[order], self.weights(particles)[order])
         edges = self.cart.bcast(edges, root=0)
         thin = self._thin_slab(edges)
         if thin is not None:
@@ -169,28 +171,10 @@ class SlabDecomposition(Decomposition):
                  total, self.size, np.array2string(self.interior_edges, precision=4), imbalance)
         return mine
 
-    def _quantile_edges(self, xs):
-        """Edges (size+1, the outer two the domain bounds) at the gaps nearest the quantiles."""
-        n = len(xs)
-        edges = np.empty(self.size + 1)
-        edges[0], edges[-1] = self.lower[0], self.upper[0]
-        if self.size == 1:
-            return edges
-        if n < 2:
-            edges[1:-1] = np.linspace(self.lower[0], self.upper[0], self.size + 1)[1:-1]
-            return edges
-        # Gaps: split positions k (0 < k < n) where xs[k-1] < xs[k].
-        gaps = np.flatnonzero(xs[1:] > xs[:-1]) + 1
-        for i in range(1, self.size):
-            target = i * n / self.size
-            if len(gaps) == 0:  # every particle at one x: no split is possible
-                edges[i] = xs[0]
-                continue
-            j = np.searchsorted(gaps, target)
-            candidates = (gaps[max(j - 1, 0)], gaps[min(j, len(gaps) - 1)])
-            k = min(candidates, key=lambda g: (abs(g - target), g))
-            edges[i] = 0.5 * (xs[k - 1] + xs[k])
-        return edges
+    def _quantile_edges(self, xs, weights):
+        """Edges (size+1, the outer two the domain bounds) at the gaps nearest the quantiles
+        of the sorted ``xs`` weighted by ``weights``."""
+        return gap_quantiles(xs, self.size, self.lower[0], self.upper[0], weights)
 
     # -- migration ------------------------------------------------------------------------------
 
@@ -372,7 +356,7 @@ class SlabDecomposition(Decomposition):
     def rebalance(self, particles, step):
         """Move the slab edges to the quantiles of x when the load is uneven; returns owned-only.
 
-        The load (max/mean owned count) is checked at every step, which costs one
+        The load (max/mean owned work) is checked at every step, which costs one
         small allgather: above ``imbalance_tolerance`` the slabs are rebalanced at
         once, so no step runs out of balance. Every ``rebalance_interval`` steps
         the drift of the load is also projected one interval ahead, and a load
@@ -393,14 +377,14 @@ class SlabDecomposition(Decomposition):
             self.migration_seconds += time.perf_counter() - start
 
     def _rebalance(self, particles, step):
-        counts = self.counts(particles)
-        before = imbalance_of(counts)
+        loads = self.loads(particles)
+        before = imbalance_of(loads)
         periodic = step % self.rebalance_interval == 0
-        reason = self._rebalance_reason(counts, step)
+        reason = self._rebalance_reason(loads, step)
         if reason is None:
             return particles
         x = particles.position[:particles.n_owned, 0]
-        edges = self._histogram_edges(x)
+        edges = self._histogram_edges(x, self.weights(particles))
         thin = (0, 0.0) if edges is None else self._thin_slab(edges)
         if thin is not None:
             if self.rank == 0 and (periodic or not self._refused):
@@ -426,9 +410,11 @@ class SlabDecomposition(Decomposition):
                  np.array2string(self.interior_edges, precision=4))
         return result
 
-    def _histogram_edges(self, x):
-        """New edges at the x quantiles: an allreduced coarse histogram, then a refined one."""
-        x = x[np.isfinite(x)]
+    def _histogram_edges(self, x, weights):
+        """New edges at the quantiles of x weighted by work: an allreduced coarse histogram,
+        then a refined one."""
+        finite = np.isfinite(x)
+        x, weights = x[finite], weights[finite]
         bounds = np.array([-np.min(x) if len(x) else -np.inf,
                            np.max(x) if len(x) else -np.inf])
         self.cart.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
@@ -438,19 +424,20 @@ class SlabDecomposition(Decomposition):
         nb = _HISTOGRAM_BINS
         width = (x_max - x_min) / nb
         coarse_index = np.clip(((x - x_min) / width).astype(np.int64), 0, nb - 1)
-        coarse = np.bincount(coarse_index, minlength=nb).astype(np.int64)
+        # float even when empty: np.bincount gives int64 then, which Allreduce would mix.
+        coarse = np.bincount(coarse_index, weights, minlength=nb).astype(np.float64)
         self.cart.Allreduce(MPI.IN_PLACE, coarse, op=MPI.SUM)
         cumulative = np.concatenate([[0], np.cumsum(coarse)])
         targets = np.arange(1, self.size) * (cumulative[-1] / self.size)
         bins = np.clip(np.searchsorted(cumulative, targets, side="right") - 1, 0, nb - 1)
         # Refine each target's coarse bin into nb sub-bins (one allreduce for all).
-        fine = np.zeros((self.size - 1, nb), np.int64)
+        fine = np.zeros((self.size - 1, nb))
         fine_width = width / nb
         for row, b in enumerate(bins):
             inside = coarse_index == b
             sub = np.clip(((x[inside] - (x_min + b * width)) / fine_width).astype(np.int64),
                           0, nb - 1)
-            fine[row] = np.bincount(sub, minlength=nb)
+            fine[row] = np.bincount(sub, weights[inside], minlength=nb).astype(np.float64)
         self.cart.Allreduce(MPI.IN_PLACE, fine, op=MPI.SUM)
         edges = np.empty(self.size + 1)
         edges[0], edges[-1] = self.edges[0], self.edges[-1]

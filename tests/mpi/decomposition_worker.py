@@ -591,6 +591,31 @@ def check_eager_migration(comm, setup):
     check_ownership(comm, decomposition, mine, 2000, "eager migration")
 
 
+def check_weighted_balance(comm, setup):
+    """Regions balance work, not counts: dummies weigh parallel.dummy_weight (0.1) of a
+    fluid particle, at the start (exact quantiles) and when rebalancing (histograms)."""
+    global_scene = random_scene(4000, 40.0, seed=12, setup=setup)
+    x = global_scene.position[:, 0]
+    global_scene.kind[:] = np.where(x > 20.0, DUMMY, FLUID)
+    decomposition = build_decomposition(comm, make_case(0.0, 40.0, setup, migration_margin=0.5))
+    mine = decomposition.distribute(global_scene)
+    check_ownership(comm, decomposition, mine, 4000, "weighted distribute")
+    if comm.size == 1:
+        return
+    counts = decomposition.counts(mine)
+    imbalance = decomposition.imbalance(mine)
+    assert_all(comm, imbalance < 1.05 and counts.max() > 1.5 * counts.min(),
+               f"distribute: work imbalance {imbalance:.3f}, counts {list(counts)}")
+    # The dummies change sides: the work is uneven until the regions move.
+    mine.kind[:] = np.where(mine.position[:, 0] > 20.0, FLUID, DUMMY)
+    before = decomposition.imbalance(mine)
+    mine = decomposition.rebalance(mine, step=decomposition.rebalance_interval)
+    after = decomposition.imbalance(mine)
+    assert_all(comm, before > 1.3 and after < 1.05 and decomposition.rebalance_count == 1,
+               f"rebalance: work imbalance {before:.3f} -> {after:.3f}")
+    check_ownership(comm, decomposition, mine, 4000, "weighted rebalance")
+
+
 # Checks of one decomposition through its interface, run for every set-up.
 GENERIC = {
     "halo": check_halo,
@@ -598,6 +623,7 @@ GENERIC = {
     "migrate": check_migrate,
     "lazy_migration": check_lazy_migration,
     "eager_migration": check_eager_migration,
+    "weighted_balance": check_weighted_balance,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
     "refusals": check_refusals,
