@@ -152,7 +152,8 @@ def test_case_options_apply_and_command_line_wins(tmp_path):
 
 def test_code_defaults_yield_to_case_options_and_the_command_line():
     gamg = {"pc_type": "gamg", "options": {}}
-    assert pressure.option_values(gamg, lambda name: False) == pressure.CODE_DEFAULTS["gamg"]
+    assert pressure.option_values(gamg, lambda name: False) == pressure.code_defaults("gamg")
+    assert pressure.option_values(gamg, lambda name: False, 3)["pc_gamg_threshold"] == "0.02"
     case = dict(gamg, options={"-mg_levels_ksp_max_it": 2, "pc_gamg_threshold": 0.1,
                                "ksp_monitor": True})
     values = pressure.option_values(case, lambda name: False)
@@ -161,6 +162,20 @@ def test_code_defaults_yield_to_case_options_and_the_command_line():
     assert "pc_gamg_threshold" not in values and values["mg_levels_ksp_max_it"] == 2
     # Another preconditioner gets none of GAMG's defaults.
     assert pressure.option_values({"pc_type": "hypre", "options": {}}, lambda name: False) == {}
+
+
+def test_gamg_threshold_keeps_the_two_nearest_lattice_shells_in_2d_and_3d():
+    from parmps.core.lattice import coupling_shells
+    for dimension, expected in ((2, 0.04), (3, 0.02)):
+        shells, relative = coupling_shells(3.1, dimension)
+        np.testing.assert_allclose(shells[:3], [1.0, np.sqrt(2.0), np.sqrt(dimension) if
+                                                dimension == 3 else 2.0])
+        threshold = pressure.gamg_threshold(dimension, 3.1)
+        assert threshold == expected
+        # Kept: the first two shells; dropped: the rest.
+        assert relative[1] > threshold > relative[2]
+    # In 3D the 2D value would drop even the nearest neighbours (0.039 of the diagonal).
+    assert coupling_shells(3.1, 3)[1][0] < 0.04
 
 
 def test_fixed_dt_beyond_courant_stops_with_message_and_keeps_output(tmp_path):

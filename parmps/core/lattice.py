@@ -57,3 +57,17 @@ def neighbour_count_reference(spacing, radius, dimension):
     """How many lattice neighbours lie within ``radius`` of an interior particle in d dimensions."""
     distance = _lattice_distances(spacing, radius, dimension)
     return int(np.count_nonzero((distance > 0) & (distance < radius)))
+
+
+def coupling_shells(radius, dimension):
+    """The full lattice's shells of neighbours within ``radius`` (in l0) and the weight of one
+    neighbour of each relative to the sum over all neighbours, w(r) / sum_j w(r_j), the
+    strength with which an algebraic multigrid sees a coupling of the Laplacian on it.
+
+    Returns (distances, relative weights), both ascending in distance.
+    """
+    distance = _lattice_distances(1.0, radius, dimension)
+    distance = distance[(distance > 0) & (distance < radius)]
+    total = float(weight(distance, radius).sum())
+    shells = np.unique(np.round(distance, 9))
+    return shells, weight(shells, radius) / total

@@ -19,10 +19,12 @@ import contextlib
 import ctypes
 import glob
 import logging
+import math
 import os
 import sys
 
 from parmps.core import kernels
+from parmps.core.lattice import coupling_shells
 from parmps.errors import CaseError, RunFailure
 
 log = logging.getLogger(__name__)
@@ -105,24 +107,48 @@ def _is_option_name(token):
         return True
 
 
-# Code defaults per preconditioner, measured on the 40k-particle dam break:
-# dropping weak couplings below 0.04 when aggregating halves CG iterations and
-# makes set-ups cheaper; one Chebyshev sweep per level instead of two costs ~2.5
-# more CG iterations but ~11 % less solve time (paired runs of scripts/bench.py).
-CODE_DEFAULTS = {"gamg": {"pc_gamg_threshold": "0.04", "mg_levels_ksp_max_it": "1"}}
+def gamg_threshold(dimension, re_laplacian):
+    """GAMG's threshold for dropping weak couplings when it aggregates, for the Laplacian of
+    radius ``re_laplacian`` (in l0) in ``dimension``: the couplings of the lattice's two
+    nearest shells (r = l0 and sqrt(2) l0) are kept, the third's and beyond dropped; the
+    geometric mean of the second and third shells' relative weights, to one significant
+    digit (0.04 in 2D and 0.02 in 3D at re = 3.1 l0).
+
+    Measured on the dam breaks (``bench``, 1 rank, 60 steps): in 2D at 40k particles 0.04
+    halves the CG iterations against none dropped and makes set-ups cheaper (0.02 and 0.01:
+    3 % slower steps). In 3D a coupling weighs less, a particle having 122 lattice
+    neighbours within 3.1 l0 against 28: 0.04 dropped even the nearest (0.039), and the
+    SPHERIC tank at 100k particles took 24 iterations a step, 57.5 s; 0.02 took 6.8 and
+    40.0 s (0.01: 8.2 iterations, 40.5 s; 0.03: 6.4 and 47.2 s, dearer set-ups).
+    """
+    _, relative = coupling_shells(re_laplacian, dimension)
+    value = math.sqrt(relative[1] * relative[2])
+    return float(f"{value:.0e}")
 
 
-def option_values(settings, on_command_line):
+def code_defaults(pc_type, dimension=2, re_laplacian=3.1):
+    """The code's PETSc options for a preconditioner: for GAMG the coupling threshold
+    (:func:`gamg_threshold`) and one Chebyshev sweep per level instead of two, which costs
+    ~2.5 more CG iterations but ~11 % less solve time (paired runs of scripts/bench.py, 2D;
+    in 3D two sweeps took 19.3 s of solve against 15.7 s)."""
+    if pc_type != "gamg":
+        return {}
+    return {"pc_gamg_threshold": f"{gamg_threshold(dimension, re_laplacian):g}",
+            "mg_levels_ksp_max_it": "1"}
+
+
+def option_values(settings, on_command_line, dimension=2, re_laplacian=3.1):
     """The PETSc options (names without the prefix) to put in the options database.
 
-    Precedence, lowest first: the code's defaults for the chosen preconditioner,
-    the case's ``[pressure] options`` (names with or without a leading dash), the
-    command line (``on_command_line(name)`` says whether it set a name; those
-    are left alone), then ``setFromOptions``.
+    Precedence, lowest first: the code's defaults for the chosen preconditioner
+    (:func:`code_defaults`, for the Laplacian's dimension and radius), the case's
+    ``[pressure] options`` (names with or without a leading dash), the command line
+    (``on_command_line(name)`` says whether it set a name; those are left alone), then
+    ``setFromOptions``.
     """
     case_options = {name.lstrip("-"): (str(value).lower() if isinstance(value, bool) else value)
                     for name, value in settings["options"].items()}
-    merged = dict(CODE_DEFAULTS.get(settings["pc_type"], {}), **case_options)
+    merged = dict(code_defaults(settings["pc_type"], dimension, re_laplacian), **case_options)
     return {name: value for name, value in merged.items() if not on_command_line(name)}
 
 
@@ -133,8 +159,10 @@ def _type_names(kind):
 class PressureSolver:
     """One KSP (CG + GAMG by default) reused for every step's pressure system."""
 
-    def __init__(self, comm, settings, command_line=None):
-        """``command_line``: the pressure options given there, name (no prefix) -> value."""
+    def __init__(self, comm, settings, command_line=None, dimension=2, re_laplacian=3.1):
+        """``command_line``: the pressure options given there, name (no prefix) -> value;
+        ``dimension`` and ``re_laplacian`` (in l0): the Laplacian's, for the code's
+        defaults."""
         PETSc = _petsc()
         self.PETSc = PETSc
         self.comm = comm
@@ -143,7 +171,8 @@ class PressureSolver:
         # The code's defaults follow the preconditioner that will really run.
         effective = dict(settings, pc_type=command_line.get(
             "pc_type", settings["options"].get("pc_type", settings["pc_type"])))
-        self.options = option_values(effective, lambda name: name in command_line)
+        self.options = option_values(effective, lambda name: name in command_line,
+                                     dimension, re_laplacian)
         self.options.update(command_line)
         self.settings = settings
         self._check_types(command_line)

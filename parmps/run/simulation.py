@@ -178,7 +178,10 @@ class Simulation:
         comm, case = self.comm, self.case
         if self.decomposition is not None:
             from parmps.fluid.ppe import PressureSolver
-            self.pressure_solver = PressureSolver(comm, case["pressure"], self.solver_options)
+            self.pressure_solver = PressureSolver(
+                comm, case["pressure"], self.solver_options,
+                dimension=len(case["domain"]["lower"]),
+                re_laplacian=case["mps"]["re_laplacian"])
             self.fluid.pressure_solver = self.pressure_solver
             log.info("pressure solver: %s", self.pressure_solver.describe())
         if self.model is not None:
