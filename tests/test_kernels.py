@@ -313,6 +313,19 @@ def test_row_masks_leave_the_other_rows_empty_and_the_rows_kept_unchanged(scene)
     np.testing.assert_array_equal(corrected_some[moving], corrected_full[moving])
 
 
+def test_sort_row_columns_sorts_rows_short_and_long_with_their_values():
+    rng = np.random.default_rng(4)
+    lengths = np.array([0, 1, 2, 9, 30, 122, 300, 1000])
+    row_ptr = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int32)
+    columns = np.concatenate([rng.permutation(5000)[:k] for k in lengths]).astype(np.int32)
+    values = columns * 10.0 + 1.0
+    expected = np.concatenate([np.sort(columns[a:b]) for a, b in zip(row_ptr[:-1],
+                                                                      row_ptr[1:])])
+    kernels.sort_row_columns(row_ptr, columns, values)
+    np.testing.assert_array_equal(columns, expected)
+    np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
+
+
 def test_sort_row_columns_sorts_each_row_with_its_values():
     rng = np.random.default_rng(3)
     row_ptr = np.array([0, 1, 5, 5, 12], np.int32)

@@ -889,26 +889,41 @@ def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surfac
                                    normal, inverse_cube, half_spacing, undirected, n_rows, 3)
 
 
+# Ciura's gaps for Shell sort, largest first, for rows of at least _SHELL_FROM entries
+# (measured: 2D rows of ~30 took 9 ms a step at 40k particles by Shell sort, 4.9 by insertion;
+# 3D rows of ~90, 88 ms a step at 100k particles against 125).
+_SHELL_GAPS = np.array([701, 301, 132, 57, 23, 10, 4, 1], np.int64)
+_SHELL_FROM = 64
+
+
 @numba.njit(cache=True)
 def sort_row_columns(row_ptr, columns, values):
-    """Sort each CSR row's entries by column, in place (insertion sort: rows hold a few
-    dozen entries, mostly in order already).
+    """Sort each CSR row's entries by column, in place: insertion sort, preceded for long rows
+    by Shell sort's larger gaps (Ciura's).
 
     PETSc's matrix made directly on CSR arrays (``MatCreateSeqAIJWithArrays``) takes
     the arrays as they are and requires sorted rows; building the matrix row by row
-    instead cost 10x more (14 ms against 1.1 ms for 6.8k rows).
+    instead cost 10x more (14 ms against 1.1 ms for 6.8k rows). The neighbour lists come
+    cell by cell, so a row is far from sorted in 3D (~120 entries): plain insertion took
+    half the 3D solve's time on one rank (125 ms a step at 5.8M entries).
     """
     for row in range(row_ptr.shape[0] - 1):
-        for p in range(row_ptr[row] + 1, row_ptr[row + 1]):
-            column = columns[p]
-            value = values[p]
-            q = p - 1
-            while q >= row_ptr[row] and columns[q] > column:
-                columns[q + 1] = columns[q]
-                values[q + 1] = values[q]
-                q -= 1
-            columns[q + 1] = column
-            values[q + 1] = value
+        start = row_ptr[row]
+        length = row_ptr[row + 1] - start
+        for gap in _SHELL_GAPS:
+            # Short rows (2D, ~30 entries) are sorted faster by insertion alone.
+            if gap >= length or (gap > 1 and length < _SHELL_FROM):
+                continue
+            for p in range(start + gap, start + length):
+                column = columns[p]
+                value = values[p]
+                q = p - gap
+                while q >= start and columns[q] > column:
+                    columns[q + gap] = columns[q]
+                    values[q + gap] = values[q]
+                    q -= gap
+                columns[q + gap] = column
+                values[q + gap] = value
 
 
 @numba.njit(cache=True)
