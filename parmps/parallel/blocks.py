@@ -185,9 +185,10 @@ class BlockDecomposition(Decomposition):
         """From the global scene (identical on every rank) keep this rank's particles.
 
         The grid is chosen again for the particles' bounding box (unless the case
-        set it); the cuts go between the lattice columns nearest the quantiles,
-        column by column. Raises CaseError on every rank if a block would be
-        narrower than the halo along a cut axis.
+        set it); the cuts go between the lattice columns nearest the quantiles of work
+        (by count where work would make a block narrower than the halo), column by
+        column. Raises CaseError on every rank if a block would still be narrower than
+        the halo along a cut axis.
         """
         position = particles.position[:particles.n_owned]
         layout = None
@@ -196,6 +197,14 @@ class BlockDecomposition(Decomposition):
             layout = grid, self._exact_cuts(position, self.weights(particles), grid)
         grid, cuts = self.comm.bcast(layout, root=0)
         self._set_grid(grid)
+        if self._thin_block(cuts) is not None:
+            # Work piles up where the fluid is: its blocks are the narrowest. The same
+            # branch on every rank (the same cuts).
+            if self.rank == 0:
+                log.info("blocks balanced by work would be thinner than the halo: balanced "
+                         "by count")
+                cuts = self._exact_cuts(position, np.ones(len(position)), grid)
+            cuts = self.comm.bcast(cuts, root=0)
         thin = self._thin_block(cuts)
         if thin is not None:
             rank, axis, width = thin

@@ -149,14 +149,20 @@ class SlabDecomposition(Decomposition):
         """From the global scene (identical on every rank) keep this rank's particles.
 
         The edges go between the lattice columns nearest the quantiles of x weighted
-        by work (:meth:`weights`), so the loads are even up to a column. Raises
-        CaseError on every rank if an interior slab would be thinner than the halo.
+        by work (:meth:`weights`), so the loads are even up to a column; where that
+        would make a slab thinner than the halo, by count. Raises CaseError on every
+        rank if an interior slab would still be thinner than the halo.
         """
         x = particles.position[:particles.n_owned, 0]
         edges = None
         if self.rank == 0:
             order = np.argsort(x, kind="stable")
             edges = self._quantile_edges(x[order], self.weights(particles)[order])
+            if self._thin_slab(edges) is not None:
+                # Work piles up where the fluid is: its slabs are the narrowest.
+                log.info("slabs balanced by work would be thinner than the halo: balanced "
+                         "by count")
+                edges = self._quantile_edges(x[order], None)
         edges = self.cart.bcast(edges, root=0)
         thin = self._thin_slab(edges)
         if thin is not None:

@@ -616,6 +616,29 @@ def check_weighted_balance(comm, setup):
     check_ownership(comm, decomposition, mine, 4000, "weighted rebalance")
 
 
+def check_thin_work_falls_back_to_count(comm, setup):
+    """Where regions balanced by work would be thinner than the halo (the fluid crowded in
+    a strip, dummies everywhere), the start balances by count instead of refusing."""
+    rng = np.random.default_rng(13)
+    _, dimension, across = SETUPS[setup]
+
+    def uniform(n, lo, hi):
+        return np.column_stack([rng.uniform(lo, hi, n)]
+                               + [rng.uniform(0.0, across, n) for _ in range(dimension - 1)])
+
+    # 3000 fluid in x < 8, 6000 dummies beyond: by work (3000 + 600) 3 or 4 ranks would cut
+    # the strip into pieces under the halo's 3.7; by count its first region is 6 to 8 wide.
+    position = np.vstack([uniform(3000, 0.0, 8.0), uniform(6000, 8.0, 80.0)])
+    kind = np.concatenate([np.full(3000, FLUID, np.int8), np.full(6000, DUMMY, np.int8)])
+    decomposition = build_decomposition(comm, make_case(0.0, 80.0, setup))
+    mine = decomposition.distribute(scene(position, kind))
+    check_ownership(comm, decomposition, mine, 9000, "count fallback")
+    if comm.size >= 3:
+        counts = decomposition.counts(mine)
+        assert_all(comm, counts.max() < 1.1 * counts.mean(),
+                   f"count fallback: counts {list(counts)}")
+
+
 # Checks of one decomposition through its interface, run for every set-up.
 GENERIC = {
     "halo": check_halo,
@@ -624,6 +647,7 @@ GENERIC = {
     "lazy_migration": check_lazy_migration,
     "eager_migration": check_eager_migration,
     "weighted_balance": check_weighted_balance,
+    "thin_work_falls_back_to_count": check_thin_work_falls_back_to_count,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
     "refusals": check_refusals,
