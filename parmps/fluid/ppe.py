@@ -271,10 +271,12 @@ class PressureSolver:
             self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
             self.setup_cost, self.reuse_limit)
 
-    def solve(self, indptr, columns, values, rhs, guess, step):
+    def solve(self, indptr, columns, values, rhs, guess, step, first_row):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
-        indptr/columns/values: CSR of the local rows with global column numbers.
+        indptr/columns/values: CSR of the local rows with global column numbers;
+        ``first_row``: the global number of this rank's first row (the rows of the ranks
+        before it come first).
         """
         PETSc = self.PETSc
         n_local = len(rhs)
@@ -286,8 +288,7 @@ class PressureSolver:
                values.astype(PETSc.ScalarType))
         kernels.sort_row_columns(*csr)
         if self.comm.size > 1:
-            first = self.comm.exscan(n_local) or 0
-            csr = kernels.split_owned_columns(*csr, index_type(first), n_local)
+            csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
         matrix = PETSc.Mat().createAIJWithArrays(
             size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr,
             comm=self.comm)

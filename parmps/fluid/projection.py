@@ -220,7 +220,7 @@ class FluidSolver:
         timers.start("solve")
         guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)
         solution, iterations, residual = self.pressure_solver.solve(
-            csr_indptr, columns, values, rhs, guess, step_number)
+            csr_indptr, columns, values, rhs, guess, step_number, first_row)
         self.last_iterations, self.last_residual = iterations, residual
 
         timers.start("operators")

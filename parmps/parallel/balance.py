@@ -44,7 +44,8 @@ def gap_quantiles(values, parts, lower, upper, weights=None):
 def histogram_quantiles(comm, x, weights, group, groups, parts, old):
     """Per group, ``parts + 1`` cuts of x at the quantiles of the work (``weights``) of the
     group's particles over all ranks (collective). ``old``: the current cuts, kept for a
-    group with no particles or a single x."""
+    group with no particles or a single x. Returns the cuts and, per group, whether it
+    was cut (it has more than one x)."""
     nb = _HISTOGRAM_BINS
     bounds = np.full((groups, 2), -np.inf)
     np.maximum.at(bounds[:, 0], group, -x)
@@ -83,4 +84,4 @@ def histogram_quantiles(comm, x, weights, group, groups, parts, old):
             below = cumulative[index, b] + np.concatenate([[0], np.cumsum(fine[index, row])])
             j = int(np.argmin(np.abs(below - target)))
             cuts[index, row + 1] = x_min[index] + b * width[index] + j * fine_width[index]
-    return cuts
+    return cuts, usable

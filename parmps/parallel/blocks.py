@@ -60,7 +60,6 @@ log = logging.getLogger(__name__)
 _WIDTH_RULE = ("(mps.re_laplacian + parallel.halo_skin + 2 x parallel.migration_margin) x "
                "particles.spacing")
 _AXES = "xyz"
-# Coarse and fine bins of the two-level parallel histograms of rebalance.
 
 
 class BlockDecomposition(Decomposition):
@@ -405,8 +404,8 @@ class BlockDecomposition(Decomposition):
         group = np.zeros(len(position), np.int64)
         for k, g in enumerate(self.grid):
             groups = int(np.prod(self.grid[:k], dtype=np.int64))
-            level = histogram_quantiles(self.comm, position[:, k], weights, group, groups, g,
-                                        self.cuts[k])
+            level, _ = histogram_quantiles(self.comm, position[:, k], weights, group, groups,
+                                           g, self.cuts[k])
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)

@@ -52,7 +52,7 @@ from mpi4py import MPI
 
 from parmps.errors import CaseError
 from parmps.core.particles import FIELDS, Particles
-from parmps.parallel.balance import gap_quantiles
+from parmps.parallel.balance import gap_quantiles, histogram_quantiles
 from parmps.parallel.base import Decomposition
 from parmps.parallel.exchange import (field_arrays, imbalance_of, merge_by_id, pack,
                                       send_to_ranks, sorted_by_id, unpack_into, unpack_new)
@@ -62,8 +62,6 @@ log = logging.getLogger(__name__)
 _WIDTH_RULE = ("(mps.re_laplacian + parallel.halo_skin + 2 x parallel.migration_margin) x "
                "particles.spacing")
 
-# Coarse and fine bins of the two-level parallel histogram used by rebalance.
-_HISTOGRAM_BINS = 1024
 
 # Message tags by the direction a message travels (towards lower or higher ranks).
 _TAG_COUNT_LEFTWARD, _TAG_COUNT_RIGHTWARD, _TAG_DATA_LEFTWARD, _TAG_DATA_RIGHTWARD = range(701, 705)
@@ -417,42 +415,14 @@ class SlabDecomposition(Decomposition):
         return result
 
     def _histogram_edges(self, x, weights):
-        """New edges at the quantiles of x weighted by work: an allreduced coarse histogram,
-        then a refined one."""
+        """New edges at the quantiles of x weighted by work, from allreduced histograms
+        (:func:`parmps.parallel.balance.histogram_quantiles`), or None when every particle
+        has the same x."""
         finite = np.isfinite(x)
-        x, weights = x[finite], weights[finite]
-        bounds = np.array([-np.min(x) if len(x) else -np.inf,
-                           np.max(x) if len(x) else -np.inf])
-        self.cart.Allreduce(MPI.IN_PLACE, bounds, op=MPI.MAX)
-        x_min, x_max = -bounds[0], bounds[1]
-        if not x_max > x_min:
-            return None
-        nb = _HISTOGRAM_BINS
-        width = (x_max - x_min) / nb
-        coarse_index = np.clip(((x - x_min) / width).astype(np.int64), 0, nb - 1)
-        # float even when empty: np.bincount gives int64 then, which Allreduce would mix.
-        coarse = np.bincount(coarse_index, weights, minlength=nb).astype(np.float64)
-        self.cart.Allreduce(MPI.IN_PLACE, coarse, op=MPI.SUM)
-        cumulative = np.concatenate([[0], np.cumsum(coarse)])
-        targets = np.arange(1, self.size) * (cumulative[-1] / self.size)
-        bins = np.clip(np.searchsorted(cumulative, targets, side="right") - 1, 0, nb - 1)
-        # Refine each target's coarse bin into nb sub-bins (one allreduce for all).
-        fine = np.zeros((self.size - 1, nb))
-        fine_width = width / nb
-        for row, b in enumerate(bins):
-            inside = coarse_index == b
-            sub = np.clip(((x[inside] - (x_min + b * width)) / fine_width).astype(np.int64),
-                          0, nb - 1)
-            fine[row] = np.bincount(sub, weights[inside], minlength=nb).astype(np.float64)
-        self.cart.Allreduce(MPI.IN_PLACE, fine, op=MPI.SUM)
-        edges = np.empty(self.size + 1)
-        edges[0], edges[-1] = self.edges[0], self.edges[-1]
-        for row, (b, target) in enumerate(zip(bins, targets)):
-            below = cumulative[b] + np.concatenate([[0], np.cumsum(fine[row])])
-            j = int(np.argmin(np.abs(below - target)))
-            edges[row + 1] = x_min + b * width + j * fine_width
-        return edges
-
+        edges, cut = histogram_quantiles(self.cart, x[finite], weights[finite],
+                                         np.zeros(np.count_nonzero(finite), np.int64), 1,
+                                         self.size, self.edges[None, :])
+        return edges[0] if cut[0] else None
 
 
 def slab_capacity(lower, upper, min_width):
