@@ -3,6 +3,8 @@ what it should. Speed targets live in the command's output, never in a timed tes
 
 import json
 
+import numpy as np
+
 import pytest
 
 from conftest import run_parmps
@@ -104,3 +106,29 @@ def test_the_model_terms_come_from_the_record():
     # is log2 P messages a rank.
     assert terms == {"cost": pytest.approx(1e-5), "messages": 100.0,
                      "message_bytes": 150.0, "reductions": 50.0}
+
+
+def test_the_solid_cost_scenes_differ_only_by_the_body(monkeypatch):
+    """--solid-cost's pair: the body's nodes sit exactly where the water variant's seventh
+    block is, on the fluid's lattice, and nowhere else do the two scenes differ (the
+    timed comparison is of the body's cost alone)."""
+    from parmps.core import scene
+    from parmps.core.particles import FLUID
+    from parmps.solids.mass_spring.model import MassSpringModel
+    from parmps.validation import bench
+    monkeypatch.setattr(bench, "FLUID_CELLS", 10)
+    monkeypatch.setattr(bench, "BODY_NODES", 4)
+    cases = {name: bench._case(None, steps=1, scene_name=name) for name in bench.BUILT_SCENES}
+    built = {name: scene.build(case)[0] for name, case in cases.items()}
+
+    def points(position):
+        return {tuple(p) for p in np.round(np.asarray(position) / bench.BODY_SPACING, 6)}
+    nodes = MassSpringModel.from_case(cases["body_3d"]).bodies[0].position
+    assert len(nodes) == 4 ** 3
+    water, with_body = built["body_3d_fluid"], built["body_3d"]
+    assert len(water) == len(with_body) + len(nodes)
+    assert points(with_body.position) | points(nodes) == points(water.position)
+    assert not points(with_body.position) & points(nodes)
+    # The water around the body comes first in both, in the same order.
+    around = np.count_nonzero(with_body.kind == FLUID)
+    np.testing.assert_array_equal(water.position[:around], with_body.position[:around])

@@ -41,9 +41,10 @@ import logging
 import numpy as np
 from mpi4py import MPI
 
-from parmps.core import operators
+from parmps.core import kernels
 from parmps.core.geometry import inside_boundary
-from parmps.core.neighbours import pair_list, rows_of
+from parmps.core.lattice import neighbour_count_reference
+from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID
 from parmps.errors import RunFailure
 from parmps.fluid.participant import Participant
@@ -75,12 +76,20 @@ def fluid_force_parts(particles, rows, constants, gradient):
     n = len(rows)
     if n == 0:
         return np.empty((0, dimension)), np.empty((0, dimension)), np.empty(0)
-    # Put the rows first so the pair search produces exactly their lists.
-    others = np.ones(len(particles), bool)
+    # Put the rows first so the pair search produces exactly their lists; only particles
+    # within the rows' reach can be their neighbours, so the search sees no others (a
+    # body's nodes are a few percent of a tank's particles).
+    reach = constants.re_laplacian
+    at_rows = particles.position[rows]
+    others = np.all((particles.position >= at_rows.min(axis=0) - reach)
+                    & (particles.position <= at_rows.max(axis=0) + reach), axis=1)
     others[rows] = False
     order = np.concatenate([rows, np.flatnonzero(others)])
     position = np.ascontiguousarray(particles.position[order])
-    indptr, cols = pair_list(position, constants.re_laplacian, n_rows=n)
+    # Room for a lattice's neighbours and a little more, so the search runs once (a 3D
+    # search costs as much as the rest of this function).
+    room = int(1.2 * n * neighbour_count_reference(constants.spacing, reach, dimension)) + 64
+    indptr, cols = pair_list(position, reach, n_rows=n, expected_pairs=room)
     pressure = particles.pressure[order]
     has_pressure = particles.kind[order] != DUMMY
     volume = constants.spacing ** dimension
@@ -89,14 +98,15 @@ def fluid_force_parts(particles, rows, constants, gradient):
     viscous_force = np.zeros((n, dimension))
     viscous_rate = np.zeros(n)
     if constants.viscosity > 0.0:
-        pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
-        w = pairs.weight(constants.re_laplacian)
-        laplacian = operators.laplacian(pairs, w, particles.velocity[order], n,
-                                        constants.n0_laplacian, constants.lambda0)
+        # The compiled sums the fluid's own viscous term uses (numpy over the pairs cost
+        # most of this function on a 10k-node body).
+        coefficient = 2.0 * dimension / (constants.lambda0 * constants.n0_laplacian)
+        velocity = np.ascontiguousarray(particles.velocity[order])
+        laplacian = coefficient * kernels.vector_laplacian_sum(indptr, cols, position,
+                                                               velocity, reach, n)
         viscous_force = volume * constants.density * constants.viscosity * laplacian
-        viscous_rate = (constants.viscosity * 2.0 * dimension
-                        / (constants.lambda0 * constants.n0_laplacian)
-                        * operators.number_density(pairs, w, n))
+        viscous_rate = (constants.viscosity * coefficient
+                        * kernels.number_density(indptr, cols, position, reach, n)[0])
     return pressure_force, viscous_force, viscous_rate
 
 
