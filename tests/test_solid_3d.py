@@ -336,6 +336,32 @@ force = [1.0, 0.0, 0.0]
     assert body.rest_volume == pytest.approx(0.02 * 0.03 * 0.04)
 
 
+def test_pinned_outside_holds_the_nodes_on_or_outside_the_box():
+    """A plate clamped along a box's sides: the nodes strictly inside move, the rest (its
+    faces included, within rounding) are pinned, on top of ``pinned``."""
+    (body,) = build(BASE_3D + "pinned_outside = [[0.0, 0.0, -1.0], [0.02, 0.03, 1.0]]\n"
+                    "pinned = \"bottom\"\n")
+    position = body.position
+    free = ((position[:, 0] > 0.005) & (position[:, 0] < 0.015) & (position[:, 1] > 0.005)
+            & (position[:, 1] < 0.025) & (position[:, 2] > 0.005))
+    assert np.count_nonzero(free) == 2 * 4
+    assert np.array_equal(~body.pinned, free)
+
+
+@pytest.mark.parametrize("box, pattern", [
+    ("[[0.0, 0.0, -1.0]]", r"must be two points \[lower, upper\] with lower < "
+                           r"upper on every axis"),
+    ("[[0.02, 0.0, -1.0], [0.0, 0.03, 1.0]]", r"with lower < upper on every axis"),
+    ("[[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]", r"holds every node of the body strictly inside: "
+                                              r"it pins none of them"),
+    ("[[0.0, 0.0, 0.0], [0.01, 0.01, 0.01]]", r"holds no node of the body strictly inside"),
+])
+def test_a_bad_pinned_outside_box_is_refused_in_one_line(box, pattern):
+    with pytest.raises(CaseError, match=r"body\[0\] 'b'.pinned_outside.*" + pattern) as info:
+        build(BASE_3D + f"pinned_outside = {box}\n")
+    assert "\n" not in str(info.value)
+
+
 BAD_3D = {
     "wrong_components": ("lower = [0.0, 0.0]", r"body\[0\].lower has 2 components but the "
                                                r"case is 3D"),

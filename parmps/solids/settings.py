@@ -85,6 +85,9 @@ SECTIONS = {
                       doc="a side whose nodes never move (front/back: the y sides of a 3D "
                           "body; top/bottom: the last axis, y in 2D, z in 3D)"),
         "pinned_ids": Key("ints", [], ge=0, doc="more nodes that never move"),
+        "pinned_outside": Key("points", [], doc="a box [lower, upper]: the nodes on or "
+                                                "outside it never move (a plate clamped "
+                                                "along the box's sides) [m]"),
         "anchors": Key("points", [], doc="fixed points (e.g. on a rigid wall) that close the "
                                          "boundary polygon: the area kept is the one between "
                                          "the body and them; they are not particles"),

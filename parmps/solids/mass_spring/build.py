@@ -17,7 +17,8 @@ Node sets (for ``pinned`` and ``[[body.load]]``): a side (the nodes at the
 extreme coordinate: ``left``/``right`` along x, ``front``/``back`` along y in
 3D, ``bottom``/``top`` along the last axis, y in 2D and z in 3D), ``all``, a 2D
 lattice's ``row`` or ``column`` or a 3D lattice's ``layer`` (``index`` from 0
-at the bottom/left), or listed ``ids``.
+at the bottom/left), or listed ``ids``; ``pinned_outside`` = [lower, upper] also
+pins every node on or outside that box (a plate clamped on its four edges).
 
 Every problem is a one-line :class:`CaseError` naming the body and the key.
 """
@@ -163,6 +164,35 @@ def node_set(label, what, position, index=0, ids=(), shape=None):
         raise CaseError(f"{label}: \"{what}\" names a side of a 3D body (along y); in 2D "
                         f"the sides are left, right, bottom and top")
     return np.flatnonzero(sides[what])
+
+
+def pinned_nodes(label, spec, position, shape):
+    """The mask of the nodes that never move: ``pinned`` (a side), ``pinned_ids`` and the
+    nodes on or outside the box ``pinned_outside``."""
+    pinned = np.zeros(len(position), bool)
+    if spec["pinned"] != "none":
+        pinned[node_set(f"{label}.pinned", spec["pinned"], position, shape=shape)] = True
+    if spec["pinned_ids"]:
+        pinned[node_set(f"{label}.pinned_ids", "ids", position, ids=spec["pinned_ids"])] = True
+    if spec["pinned_outside"]:
+        pinned |= not_inside_box(f"{label}.pinned_outside", spec["pinned_outside"], position)
+    return pinned
+
+
+def not_inside_box(label, box, position):
+    """The nodes on or outside the box ``box`` = [lower, upper] (within rounding): a plate
+    clamped along the box's sides, its margin beyond them held too."""
+    if len(box) != 2 or not np.all(np.asarray(box[0]) < np.asarray(box[1])):
+        raise CaseError(f"{label} must be two points [lower, upper] with lower < upper on "
+                        f"every axis, got {box}")
+    lower, upper = np.asarray(box[0], float), np.asarray(box[1], float)
+    tol = 1e-9 * max(float(np.ptp(position, axis=0).max()), 1e-300)
+    inside = np.all((position > lower + tol) & (position < upper - tol), axis=1)
+    if inside.all() or not inside.any():
+        which = "every node" if inside.all() else "no node"
+        raise CaseError(f"{label} = {box} holds {which} of the body strictly inside: it pins "
+                        f"{'none' if inside.all() else 'all'} of them")
+    return ~inside
 
 
 def _check_springs(label, springs, n):
@@ -349,11 +379,7 @@ def build_body(k, spec, gravity, domain=None):
     n = len(position)
     anchors, boundary, outline = _closed_boundary(label, spec, position, boundary, shape)
     _check_placement(label, np.concatenate([position, anchors]), springs, domain)
-    pinned = np.zeros(n, bool)
-    if spec["pinned"] != "none":
-        pinned[node_set(f"{label}.pinned", spec["pinned"], position, shape=shape)] = True
-    if spec["pinned_ids"]:
-        pinned[node_set(f"{label}.pinned_ids", "ids", position, ids=spec["pinned_ids"])] = True
+    pinned = pinned_nodes(label, spec, position, shape)
     loads = _loads(label, spec, position, shape)
     velocity = np.tile(np.asarray(spec["velocity"], dtype=float), (n, 1))
     if len(anchors):
