@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from parmps.core import operators
+from parmps.core import neighbours, operators
 from parmps.core.lattice import reference_values
 from parmps.core.neighbours import close_pairs, pair_list, rows_of
 
@@ -67,16 +67,16 @@ def test_neighbour_search_3d_sparse_cells():
 @pytest.mark.parametrize("dimension", [2, 3])
 def test_neighbours_come_in_cell_order(dimension):
     # Within a row, neighbours come cell by cell in ascending cell number
-    # x + nx (y + ny z) (cells of side re from the lower corner), and within a
-    # cell in particle index order: in 2D the order the pair sums have always
-    # been taken in.
+    # x + nx (y + ny z) (cells of side re / CELLS_PER_RADIUS from the lower corner), and
+    # within a cell in particle index order.
     rng = np.random.default_rng(2)
     radius = 0.05
     position = rng.uniform(0, 0.3, size=(800, dimension))
     indptr, cols = pair_list(position, radius)
+    side = radius / neighbours.CELLS_PER_RADIUS * (1.0 + 1e-12)
     origin = position.min(axis=0) - 1e-12
-    cells = ((position.max(axis=0) - origin) / radius).astype(int) + 1
-    cell = ((position - origin) / radius).astype(int)
+    cells = ((position.max(axis=0) - origin) / side).astype(int) + 1
+    cell = ((position - origin) / side).astype(int)
     key = np.ravel_multi_index(cell.T[::-1], cells[::-1])
     for i in range(len(position)):
         found = cols[indptr[i]:indptr[i + 1]]

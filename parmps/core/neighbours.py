@@ -14,6 +14,10 @@ import math
 import numba
 import numpy as np
 
+# Cells per search radius. With cells as wide as the radius, the 3^d cells searched hold
+# 27 r^3 of space in 3D around a ball of 4.2 r^3; halved, 5^d half-cells hold 15.6 r^3.
+CELLS_PER_RADIUS = 2
+
 
 @numba.njit(cache=True)
 def _cell_coordinates(position, origin, cell_size):
@@ -28,8 +32,9 @@ def _cell_coordinates(position, origin, cell_size):
 
 @numba.njit(cache=True, inline="always")
 def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-              indices, rows, d):
-    """Pairs of rows [0, n_rows) within ``radius``, over the 3^d cells around each row.
+              indices, rows, reach, d):
+    """Pairs of rows [0, n_rows) within ``radius``, over the (2 reach + 1)^d cells around
+    each row (cells at least radius/reach wide).
 
     Fills ``indptr`` and as many pairs as ``indices`` has room for, and returns
     the number of pairs found: more than ``len(indices)`` means the list is
@@ -51,8 +56,8 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
             indptr[i + 1] = total
             continue
         for k in range(d):
-            lo[k] = max(cell[i, k] - 1, 0)
-            hi[k] = min(cell[i, k] + 2, cells[k])
+            lo[k] = max(cell[i, k] - reach, 0)
+            hi[k] = min(cell[i, k] + reach + 1, cells[k])
             at[k] = lo[k]
         while True:
             base = 0
@@ -86,16 +91,16 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
 
 @numba.njit(cache=True)
 def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr, indices,
-            rows):
+            rows, reach):
     # d as a literal, so the component loops unroll (see parmps.core.kernels).
     if position.shape[1] == 2:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         indptr, indices, rows, 2)
+                         indptr, indices, rows, reach, 2)
     if position.shape[1] == 3:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         indptr, indices, rows, 3)
+                         indptr, indices, rows, reach, 3)
     return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                     indptr, indices, rows, position.shape[1])
+                     indptr, indices, rows, reach, position.shape[1])
 
 
 def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
@@ -116,12 +121,14 @@ def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
         return indptr, np.empty(0, np.int64)
     origin = position.min(axis=0) - 1e-12
     extent = position.max(axis=0) - origin
-    # Cells no smaller than the radius, so the 3^d cells around a particle hold
-    # every neighbour; larger when the particles are sparse, so the cell table
-    # stays O(n) in memory.
-    cell_size = radius
+    # Cells a fraction 1/CELLS_PER_RADIUS of the radius, so the (2 reach + 1)^d cells around a
+    # particle hold every neighbour and less else; larger when the particles are sparse, so
+    # the cell table stays O(n) in memory.
+    # A hair wider than radius/reach, so reach cells always span the radius despite rounding.
+    cell_size = radius / CELLS_PER_RADIUS * (1.0 + 1e-12)
     while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * n + 4096:
         cell_size *= 1.5
+    reach = max(1, math.ceil(radius / cell_size))
     cells = np.array([int(e / cell_size) + 1 for e in extent], np.int64)
     stride = np.concatenate([[1], np.cumprod(cells[:-1])]).astype(np.int64)
     cell = _cell_coordinates(position, origin, cell_size)
@@ -130,11 +137,11 @@ def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
     cell_start = np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
     indices = np.empty(max(int(expected_pairs), 0), np.int64)
     total = _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-                    indices, rows)
+                    indices, rows, reach)
     if total > len(indices):
         indices = np.empty(total, np.int64)
         _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-                indices, rows)
+                indices, rows, reach)
     return indptr, indices[:total]
 
 
