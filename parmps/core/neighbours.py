@@ -121,10 +121,10 @@ def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
         return indptr, np.empty(0, np.int64)
     origin = position.min(axis=0) - 1e-12
     extent = position.max(axis=0) - origin
-    # Cells a fraction 1/CELLS_PER_RADIUS of the radius, so the (2 reach + 1)^d cells around a
-    # particle hold every neighbour and less else; larger when the particles are sparse, so
-    # the cell table stays O(n) in memory.
-    # A hair wider than radius/reach, so reach cells always span the radius despite rounding.
+    # Cells 1/CELLS_PER_RADIUS of the radius wide (a hair wider, so that ``reach`` of them
+    # span the radius despite rounding): the (2 reach + 1)^d cells around a particle hold
+    # every neighbour and little else. Larger when the particles are sparse, so the cell
+    # table stays O(n) in memory; ``reach`` then falls to 1.
     cell_size = radius / CELLS_PER_RADIUS * (1.0 + 1e-12)
     while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * n + 4096:
         cell_size *= 1.5

@@ -69,7 +69,7 @@ from parmps.validation import ROOT
 CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 PEER_CASE = os.path.join(ROOT, "cases", "dam_break_2d_peer.toml")
 SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_break_3d.toml")}
-# The solid's cost (--solid-cost): a still tank of FLUID_CELLS^3 fluid particles at l0 = 1 cm
+# The solid's cost (--solid-cost): a still tank FLUID_CELLS particles a side at l0 = 1 cm
 # around a submerged lattice body of BODY_NODES^3 nodes (10,648: the 10k-node body in
 # a 100k-particle fluid), against the same tank with the body's place filled with water. The
 # body is rubber (the elastic gate's E = 12 MPa, rho = 1100 kg/m^3), its volume kept.
