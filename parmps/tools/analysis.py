@@ -295,6 +295,16 @@ def tip_trajectory(path, case):
         return result.frames.times, np.array(ys)
 
 
+def sag_series(path, body, nodes, rest):
+    """The frames' times and the mean downward displacement (along the last axis, which
+    gravity points down) of the body's ``nodes`` from their ``rest`` positions in each."""
+    with open_result(path) as result:
+        times = result.frames.times
+        sag = np.array([-float(np.mean(frame.bodies[body]["position"][nodes, -1]
+                                       - rest[nodes, -1])) for frame in result.frames])
+    return times, sag
+
+
 def clamped_plate_deflection(path, case, settle_time, body="plate"):
     """Time-averaged mid-span deflection of a plate clamped at both ends under a water
     column, against Euler-Bernoulli: w = q L^4 / (384 D), q = g (rho_f h + rho_s t).
@@ -340,10 +350,7 @@ def clamped_plate_deflection(path, case, settle_time, body="plate"):
     g = gravity(case)
     load = g * (case["fluid"]["density"] * (upper[1] - lower[1]) + spec["density"] * thickness)
     expected = load * span ** 4 / (384.0 * bending)
-    with open_result(path) as result:
-        times = result.frames.times
-        deflection = np.array([-float(np.mean(frame.bodies[body]["position"][column, 1] -
-                                              rest[column, 1])) for frame in result.frames])
+    times, deflection = sag_series(path, body, column, rest)
     mean = window_mean(times, deflection, settle_time, times[-1])
     settled = deflection[times >= settle_time]
     return {"deflection": mean, "expected": float(expected),
@@ -390,10 +397,7 @@ def clamped_square_plate_deflection(path, case, settle_time, body="plate"):
     load = gravity(case) * (case["fluid"]["density"] * (upper[2] - lower[2])
                             + spec["density"] * thickness)
     expected = KIRCHHOFF_CLAMPED_SQUARE * load * spans[0] ** 4 / bending
-    with open_result(path) as result:
-        times = result.frames.times
-        deflection = np.array([-float(np.mean(frame.bodies[body]["position"][column, 2]
-                                              - rest[column, 2])) for frame in result.frames])
+    times, deflection = sag_series(path, body, column, rest)
     mean, period, periods = whole_period_mean(times, deflection, settle_time, times[-1])
     settled = deflection[times >= settle_time]
     return {"deflection": mean, "expected": float(expected),

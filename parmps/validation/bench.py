@@ -149,7 +149,6 @@ def _submerged_body(with_body):
         # Below and above the body along this axis, over the slab the previous axes left.
         for lo, hi in ((0.0, start), (end, side)):
             lower, upper = [start] * 3, [end] * 3
-            lower[:axis], upper[:axis] = [start] * axis, [end] * axis
             lower[axis], upper[axis] = lo, hi
             lower[axis + 1:], upper[axis + 1:] = [0.0] * (2 - axis), [side] * (2 - axis)
             blocks.append({"lower": lower, "upper": upper})

@@ -185,14 +185,13 @@ def not_inside_box(label, box, position):
     if len(box) != 2 or not np.all(np.asarray(box[0]) < np.asarray(box[1])):
         raise CaseError(f"{label} must be two points [lower, upper] with lower < upper on "
                         f"every axis, got {box}")
-    lower, upper = np.asarray(box[0], float), np.asarray(box[1], float)
     tol = 1e-9 * max(float(np.ptp(position, axis=0).max()), 1e-300)
-    inside = np.all((position > lower + tol) & (position < upper - tol), axis=1)
-    if inside.all() or not inside.any():
-        which = "every node" if inside.all() else "no node"
+    pinned = outside_box(position, np.add(box[0], tol), np.subtract(box[1], tol))
+    if not pinned.any() or pinned.all():
+        which = "every node" if not pinned.any() else "no node"
         raise CaseError(f"{label} = {box} holds {which} of the body strictly inside: it pins "
-                        f"{'none' if inside.all() else 'all'} of them")
-    return ~inside
+                        f"{'none' if not pinned.any() else 'all'} of them")
+    return pinned
 
 
 def _check_springs(label, springs, n):
