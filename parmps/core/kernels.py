@@ -500,26 +500,49 @@ def correct_normal_component(indptr, cols, position, has_pressure, radius, scale
 
 # --- collisions -------------------------------------------------------------------------------
 
+# How far above a wall layer's plane its gaps close, in collision distances: a quarter of
+# a spacing at the default 0.5 l0, a margin a step's overshoot does not cross.
+WALL_GAP_CLOSURE = 0.5
+
+
 @numba.njit(cache=True, inline="always")
 def _collision_change(indptr, cols, position, velocity, moving, distance_limit, restitution,
                       n_rows, d):
     out = np.zeros((n_rows, d))
     limit2 = distance_limit * distance_limit
-    # A wall layer is a (d-1)-dimensional square lattice: the centre of its widest gap
-    # lies sqrt(d-1)/2 spacings from the particles around it (half a spacing in 2D, 0.71
-    # in 3D). A fixed partner's reach grows by sqrt(d-1) so that the gaps close at the
-    # layer's plane in any d, as a 2D wall's do at 0.5 l0: a 3D wall's gaps otherwise let
-    # fluid through at an impact.
-    fixed_limit2 = limit2 * (d - 1)
+    # A wall layer is a (d-1)-dimensional square lattice: the centre of its widest gap lies
+    # sqrt(d-1)/2 spacings from the particles around it (half a spacing in 2D, 0.71 in
+    # 3D), so a fixed partner reaches far enough that the gaps close above the layer's
+    # plane, by WALL_GAP_CLOSURE collision distances: a droplet that rests on a wall (no
+    # pressure holds it) otherwise sinks down the lattice's gaps, which gravity and the
+    # collisions themselves steer it into.
+    fixed_limit2 = limit2 * ((d - 1) + WALL_GAP_CLOSURE * WALL_GAP_CLOSURE)
+    fixed_limit = np.sqrt(fixed_limit2)
+    normal = np.zeros(d)
+    wall_velocity = np.zeros(d)
     for i in range(n_rows):
         if not moving[i]:
             continue
+        # Fixed partners act together, as one wall: their contact normal is the
+        # overlap-weighted sum of their directions to i. Pair by pair, the partners around
+        # a gap each see a glancing approach and together do not stop the particle.
+        weight_sum = 0.0
+        for k in range(d):
+            normal[k] = 0.0
+            wall_velocity[k] = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             r2 = pair_distance2(position, i, j, d)
             if r2 >= (limit2 if moving[j] else fixed_limit2) or r2 <= 0.0:
                 continue
             r = np.sqrt(r2)
+            if not moving[j]:
+                weight = 1.0 - r / fixed_limit
+                weight_sum += weight
+                for k in range(d):
+                    normal[k] += weight * (pair_component(position, i, j, k) / r)
+                    wall_velocity[k] += weight * velocity[j, k]
+                continue
             # The unit vector r_ij / r, component by component.
             approach = 0.0
             for k in range(d):
@@ -527,10 +550,25 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
                     (pair_component(position, i, j, k) / r)
             if approach <= 0.0:
                 continue
-            share = 0.5 if moving[j] else 1.0
-            impulse = (1.0 + restitution) * share * approach
+            impulse = (1.0 + restitution) * 0.5 * approach
             for k in range(d):
                 out[i, k] -= impulse * (pair_component(position, i, j, k) / r)
+        if weight_sum <= 0.0:
+            continue
+        length = 0.0
+        for k in range(d):
+            length += normal[k] * normal[k]
+        length = np.sqrt(length)
+        if length <= 1e-12 * weight_sum:
+            continue
+        approach = 0.0
+        for k in range(d):
+            approach += (velocity[i, k] - wall_velocity[k] / weight_sum) * (normal[k] / length)
+        if approach <= 0.0:
+            continue
+        impulse = (1.0 + restitution) * approach
+        for k in range(d):
+            out[i, k] -= impulse * (normal[k] / length)
     return out
 
 
@@ -540,7 +578,8 @@ def collision_change(indptr, cols, position, velocity, moving, distance_limit, r
     """Velocity changes of moving particles from collisions closer than ``distance_limit``.
 
     Uses pre-collision velocities only, so the result is independent of pair order:
-    two moving particles share the impulse; a fixed partner is infinitely heavy.
+    two moving particles share the impulse; the fixed partners within reach act as one
+    infinitely heavy wall along their combined contact normal.
     """
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:

@@ -28,8 +28,8 @@ warns at the start and names that cause when such a run fails;
 Leaks. The fluid cannot pass a solid thinner than the kernel (a 3-node
 membrane) because every node, whatever its depth, repels fluid through the
 pressure of its own PPE row, and the collision model reflects a fluid particle
-off a node closer than collision_distance as off a wall (the node's velocity
-is the wall velocity). A node on a side with no fluid has a low number
+off the nodes within a fixed partner's reach as off a wall (their velocity is
+the wall's). A node on a side with no fluid has a low number
 density and becomes a Dirichlet (P = 0) particle like a free surface, which is
 what that side is. :func:`fluid_inside` counts fluid particles inside each
 body's closed boundary (its model's ``boundary``, any d) every step, so a leak
@@ -283,6 +283,15 @@ class WeakCoupling(Participant):
             particles.position[index] = body.position[node_of[mine]]
             particles.velocity[index] = body.velocity[node_of[mine]]
         return particles
+
+    def node_substeps(self, dt):
+        """Each rank's node-substeps in a step of dt: a body's nodes times its substeps, on
+        the body's owner (the same on every rank)."""
+        counts = self.model.substep_counts(dt)
+        work = np.zeros(self.comm.size)
+        for k, body in enumerate(self.model.bodies):
+            work[self.owners[k]] += len(body.position) * counts[body.name]
+        return work
 
     def node_forces(self, particles, rows, dt):
         """The fluid force on the owned node particles ``rows``, held over the bodies' step."""
