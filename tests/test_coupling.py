@@ -255,3 +255,35 @@ def test_pure_fluid_case_builds_no_solid_or_inflow_machinery():
                             cwd=ROOT, capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_bodys_substeps_count_in_its_owners_load():
+    """The coupling reports each body's node-substeps on its owner (body k on rank k mod P),
+    and the fluid stepper hands them, times parallel.node_substep_weight, to the
+    decomposition's balance as each rank's extra work."""
+    from types import SimpleNamespace
+
+    from parmps.coupling.weak import WeakCoupling
+    from parmps.run.steppers import FluidStepper
+    from parmps.solids import solid_model
+
+    case = CHECKS["box_in_flow"].case()
+    case["body"] = [case["body"][0], dict(case["body"][0], name="second")]
+    model = solid_model(case)
+    coupling = WeakCoupling.__new__(WeakCoupling)
+    coupling.model, coupling.comm, coupling.owners = model, SimpleNamespace(size=3), [2, 0]
+    dt = 1e-3
+    counts = model.substep_counts(dt)
+    nodes = [len(body.position) for body in model.bodies]
+    work = coupling.node_substeps(dt)
+    np.testing.assert_array_equal(work, [nodes[1] * counts["second"], 0,
+                                         nodes[0] * counts["box"]])
+    assert work.sum() > 0
+
+    received = []
+    stepper = FluidStepper.__new__(FluidStepper)
+    stepper.case = {"parallel": {"node_substep_weight": 0.02}}
+    stepper.participants = [coupling, SimpleNamespace(node_substeps=lambda dt: None)]
+    stepper.decomposition = SimpleNamespace(set_extra_work=received.append)
+    stepper._count_extra_work(dt)
+    np.testing.assert_allclose(received[0], 0.02 * work)

@@ -92,6 +92,17 @@ def test_exception_on_one_rank_aborts_the_job(ranks):
     assert "boom on purpose" in result.stderr
 
 
+def test_a_part_with_extra_work_gets_that_much_less_of_the_particles():
+    from parmps.parallel.balance import part_targets
+    # 100 units of particle work over 4 parts, the first carrying 20 more: 30 each in all.
+    np.testing.assert_allclose(part_targets(100.0, 4, [20.0, 0, 0, 0]), [10.0, 40.0, 70.0])
+    # Without extra work (or none given), equal shares.
+    np.testing.assert_allclose(part_targets(100.0, 4, np.zeros(4)), [25.0, 50.0, 75.0])
+    np.testing.assert_allclose(part_targets(100.0, 4), [25.0, 50.0, 75.0])
+    # Extra work beyond the mean: that part takes no particles, the others share them.
+    np.testing.assert_allclose(part_targets(100.0, 3, [0.0, 500.0, 0.0]), [50.0, 50.0])
+
+
 def test_pack_round_trip():
     from parmps.parallel.exchange import pack, unpack_new
     rng = np.random.default_rng(0)

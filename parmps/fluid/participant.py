@@ -29,6 +29,10 @@ over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
 and ``diagnostics()`` add columns to the run's diagnostics;
 ``particle_owner(pid)`` names the geometry a particle belongs to and what to
 do about it, for messages: ``(description, advice)`` or None.
+``node_substeps(dt)``: the bodies' node-substeps each rank will run in a step of
+dt (an array over the ranks, the same on every rank), or None: work beyond the
+rank's particles, which the decomposition's balance counts
+(``parallel.node_substep_weight``).
 
 A participant with state beyond the particles (counters, bodies) has a ``name``
 and contributes it to checkpoints: ``checkpoint_state()`` (collective; a dict
@@ -72,4 +76,7 @@ class Participant:
         return {}
 
     def particle_owner(self, particle_id):
+        return None
+
+    def node_substeps(self, dt):
         return None

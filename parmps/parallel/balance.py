@@ -4,7 +4,9 @@ by every decomposition.
 Each particle weighs its kind's work (``Decomposition.weights``); the cuts go at
 the quantiles of that work, exactly on one rank's sorted copy of the scene
 (:func:`gap_quantiles`, at the start) or from allreduced histograms while the run
-goes on (:func:`histogram_quantiles`).
+goes on (:func:`histogram_quantiles`). A part may carry work beyond its particles
+(``extra``: a body's substeps on its owner rank); it then gets that much less of the
+particles' work (:func:`part_targets`).
 """
 
 import numpy as np
@@ -13,10 +15,22 @@ from mpi4py import MPI
 _HISTOGRAM_BINS = 1024
 
 
-def gap_quantiles(values, parts, lower, upper, weights=None):
+def part_targets(total, parts, extra=None):
+    """The particles' work below each of the ``parts - 1`` interior cuts: every part's load
+    (its particles' work plus its ``extra``) equal, none with less than no particles.
+    ``extra``: each part's work beyond its particles (None: none)."""
+    if extra is None or not np.any(extra):
+        return total * (np.arange(1, parts) / parts)
+    share = np.maximum((total + float(np.sum(extra))) / parts - np.asarray(extra, float), 0.0)
+    # A part whose extra alone exceeds the mean takes no particles; the others share them.
+    share *= total / share.sum() if share.sum() > 0 else 0.0
+    return np.cumsum(share)[:-1]
+
+
+def gap_quantiles(values, parts, lower, upper, weights=None, extra=None):
     """``parts + 1`` cuts of sorted ``values``: the bounds, then the gaps between distinct
     values nearest the quantiles of ``weights`` (each value's work, 1 if None; lattice
-    columns stay whole)."""
+    columns stay whole), less each part's ``extra`` work (:func:`part_targets`)."""
     cuts = np.empty(parts + 1)
     cuts[0], cuts[-1] = lower, upper
     n = len(values)
@@ -29,8 +43,7 @@ def gap_quantiles(values, parts, lower, upper, weights=None):
     below = np.arange(n + 1.0) if weights is None else np.concatenate([[0.0],
                                                                        np.cumsum(weights)])
     gaps = np.flatnonzero(values[1:] > values[:-1]) + 1
-    for i in range(1, parts):
-        target = i * below[-1] / parts
+    for i, target in enumerate(part_targets(below[-1], parts, extra), start=1):
         if len(gaps) == 0:  # every value the same: no split is possible
             cuts[i] = values[0]
             continue
@@ -41,11 +54,12 @@ def gap_quantiles(values, parts, lower, upper, weights=None):
     return cuts
 
 
-def histogram_quantiles(comm, x, weights, group, groups, parts, old):
+def histogram_quantiles(comm, x, weights, group, groups, parts, old, extra=None):
     """Per group, ``parts + 1`` cuts of x at the quantiles of the work (``weights``) of the
-    group's particles over all ranks (collective). ``old``: the current cuts, kept for a
-    group with no particles or a single x. Returns the cuts and, per group, whether it
-    was cut (it has more than one x)."""
+    group's particles over all ranks (collective), less each part's ``extra`` work
+    ((groups, parts), or None). ``old``: the current cuts, kept for a group with no
+    particles or a single x. Returns the cuts and, per group, whether it was cut (it has
+    more than one x)."""
     nb = _HISTOGRAM_BINS
     bounds = np.full((groups, 2), -np.inf)
     np.maximum.at(bounds[:, 0], group, -x)
@@ -60,7 +74,9 @@ def histogram_quantiles(comm, x, weights, group, groups, parts, old):
                          minlength=groups * nb).astype(np.float64).reshape(groups, nb)
     comm.Allreduce(MPI.IN_PLACE, coarse, op=MPI.SUM)
     cumulative = np.concatenate([np.zeros((groups, 1)), np.cumsum(coarse, axis=1)], axis=1)
-    targets = cumulative[:, -1:] * (np.arange(1, parts) / parts)
+    targets = np.array([part_targets(cumulative[index, -1], parts,
+                                     None if extra is None else extra[index])
+                        for index in range(groups)]).reshape(groups, parts - 1)
     bins = np.empty((groups, parts - 1), np.int64)
     for index in range(groups):
         found = np.searchsorted(cumulative[index], targets[index], side="right") - 1

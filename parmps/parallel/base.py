@@ -78,6 +78,8 @@ class Decomposition(abc.ABC):
         self.kind_weight = np.ones(max(KIND_NAMES) + 1)
         self.kind_weight[WALL] = parallel["wall_weight"]
         self.kind_weight[DUMMY] = parallel["dummy_weight"]
+        # Work a rank carries beyond its particles, in particle weights (set_extra_work).
+        self.extra_work = np.zeros(self.size)
         self.rebalance_interval = int(parallel["rebalance_interval"])
         self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
         self.halo_seconds = 0.0
@@ -167,12 +169,18 @@ class Decomposition(abc.ABC):
         """The load-balance weight of each owned particle (local)."""
         return self.kind_weight[particles.kind[:particles.n_owned]]
 
+    def set_extra_work(self, work):
+        """Each rank's work beyond its particles (an array over the ranks, the same on every
+        rank), in the particles' weights: a body's substeps on the rank that runs them.
+        The balance gives a rank that much less particle work from its next rebalance."""
+        self.extra_work = np.asarray(work, dtype=np.float64).reshape(self.size)
+
     def loads(self, particles):
-        """Owned work of every rank, the particles weighted by kind (the same on every
-        rank)."""
+        """Owned work of every rank, the particles weighted by kind, plus its extra work
+        (the same on every rank)."""
         loads = np.empty(self.size)
         self.comm.Allgather(np.array([self.weights(particles).sum()]), loads)
-        return loads
+        return loads + self.extra_work
 
     def imbalance(self, particles):
         """Largest rank's owned work over the mean (1.0 is perfect balance)."""

@@ -232,7 +232,8 @@ class BlockDecomposition(Decomposition):
                 values = position[group == index, k]
                 order = np.argsort(values, kind="stable")
                 level[index] = gap_quantiles(values[order], g, self.lower[k], self.upper[k],
-                                             weights[group == index][order])
+                                             weights[group == index][order],
+                                             self._extra_of_parts(grid, k)[index])
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)
@@ -395,6 +396,13 @@ class BlockDecomposition(Decomposition):
                  "rank %d", step, before, reason, after, len(self._neighbours), self.rank)
         return result
 
+    def _extra_of_parts(self, grid, k):
+        """The extra work of each part of each group cut along axis k, (groups, grid[k]):
+        the ranks are the grid's cells in row-major order, a part along axis k holds those
+        that share its first k + 1 coordinates."""
+        per_rank = self.extra_work.reshape(grid)
+        return per_rank.sum(axis=tuple(range(k + 1, len(grid)))).reshape(-1, grid[k])
+
     def _histogram_cuts(self, position, weights):
         """New nested cuts, axis by axis: per group, the quantiles of work over an allreduced
         coarse histogram refined by a second one (collective; the same cuts on every rank)."""
@@ -405,7 +413,7 @@ class BlockDecomposition(Decomposition):
         for k, g in enumerate(self.grid):
             groups = int(np.prod(self.grid[:k], dtype=np.int64))
             level, _ = histogram_quantiles(self.comm, position[:, k], weights, group, groups,
-                                           g, self.cuts[k])
+                                           g, self.cuts[k], self._extra_of_parts(self.grid, k))
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)

@@ -31,6 +31,13 @@ SECTIONS = {
         "dummy_weight": Key("float", 0.1, ge=0.0, le=1.0,
                             doc="load balance: a dummy particle's work relative to a fluid "
                                 "particle's"),
+        # A body's substeps run on its owner rank while the others wait for its state;
+        # measured on the solid-cost scene (bench --solid-cost: a 10,648-node lattice,
+        # 46 substeps a step) against its fluid's work per particle weight on 1 rank.
+        "node_substep_weight": Key("float", 0.01, ge=0.0,
+                                   doc="load balance: one body node's substep relative to a "
+                                       "fluid particle's step (a body's substeps count on the "
+                                       "rank that runs them; 0: not counted)"),
         "migration_margin": Key("float", 0.5, ge=0.0, le=5.0,
                                 doc="particles migrate once one is this far (in l0) outside "
                                     "its region; halo and regions widen by it (0: every step)"),

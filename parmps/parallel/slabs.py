@@ -178,7 +178,8 @@ class SlabDecomposition(Decomposition):
     def _quantile_edges(self, xs, weights):
         """Edges (size+1, the outer two the domain bounds) at the gaps nearest the quantiles
         of the sorted ``xs`` weighted by ``weights``."""
-        return gap_quantiles(xs, self.size, self.lower[0], self.upper[0], weights)
+        return gap_quantiles(xs, self.size, self.lower[0], self.upper[0], weights,
+                             self.extra_work)
 
     # -- migration ------------------------------------------------------------------------------
 
@@ -421,7 +422,8 @@ class SlabDecomposition(Decomposition):
         finite = np.isfinite(x)
         edges, cut = histogram_quantiles(self.cart, x[finite], weights[finite],
                                          np.zeros(np.count_nonzero(finite), np.int64), 1,
-                                         self.size, self.edges[None, :])
+                                         self.size, self.edges[None, :],
+                                         self.extra_work[None, :])
         return edges[0] if cut[0] else None
 
 

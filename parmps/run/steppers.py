@@ -105,6 +105,7 @@ class FluidStepper:
         particles = state.particles
         for participant in self.participants:
             participant.before_exchange(particles, time, dt)
+        self._count_extra_work(dt)
         timers = self.fluid.timers
         timers.start("halo")
         particles = self.decomposition.update(particles, step,
@@ -124,6 +125,14 @@ class FluidStepper:
         for participant in self.participants:
             particles = participant.after_fluid(particles, time, dt, self.decomposition)
         state.particles = particles
+
+    def _count_extra_work(self, dt):
+        """Tell the decomposition the work each rank does beyond its particles (a body's
+        substeps run on its owner), so the balance gives that rank fewer particles."""
+        weight = self.case["parallel"]["node_substep_weight"]
+        work = [w for w in (p.node_substeps(dt) for p in self.participants) if w is not None]
+        if work and weight > 0:
+            self.decomposition.set_extra_work(weight * np.sum(work, axis=0))
 
     def check(self, state):
         """Stop loudly on NaN, a particle leaving the domain (fluid is removed instead when

@@ -342,6 +342,37 @@ def check_rebalance(comm, setup):
                and np.array_equal(again.id, balanced.id), "a balanced load was rebalanced")
 
 
+def check_extra_work(comm, setup):
+    """A rank that carries work beyond its particles (a body's substeps) gets that much less
+    particle work at the next rebalance: every rank's load, particles plus extra, within the
+    tolerance of the mean; a balanced load with its extra is then left alone."""
+    global_scene = random_scene(6000, 60.0, seed=7, setup=setup)
+    decomposition = build_decomposition(
+        comm, make_case(0.0, 60.0, setup, rebalance_interval=4))
+    mine = decomposition.distribute(global_scene)
+    # The last rank runs a third of a rank's share of extra work.
+    extra = np.zeros(comm.size)
+    extra[-1] = 6000 / comm.size / 3
+    decomposition.set_extra_work(extra)
+    before = decomposition.imbalance(mine)
+    mine = decomposition.rebalance(mine, step=6)
+    after = decomposition.imbalance(mine)
+    assert_all(comm, after <= 1.10, f"imbalance with the extra work {after:.4f} after "
+                                    f"rebalancing (was {before:.3f})")
+    check_ownership(comm, decomposition, mine, 6000, "rebalance with extra work")
+    if comm.size > 1:
+        # Its share of all the work less its extra: 2500 of 3000 particles on 2 ranks.
+        expected = (6000 + extra[-1]) / comm.size - extra[-1]
+        counts = decomposition.counts(mine)
+        assert_all(comm, before > 1.1 and abs(counts[-1] - expected) < 0.03 * expected,
+                   f"the rank with extra work owns {counts[-1]} particles, expected "
+                   f"{expected:.0f} (imbalance before {before:.3f})")
+    boxes = _boxes(decomposition)
+    again = decomposition.rebalance(mine, step=8)
+    assert_all(comm, np.array_equal(boxes, _boxes(decomposition))
+               and np.array_equal(again.id, mine.id), "a balanced load was rebalanced")
+
+
 def check_rebalance_projection(comm, setup):
     """Within the tolerance but drifting: a periodic check rebalances ahead of the crossing."""
     global_scene = random_scene(6000, 60.0, seed=8, setup=setup)
@@ -650,6 +681,7 @@ GENERIC = {
     "thin_work_falls_back_to_count": check_thin_work_falls_back_to_count,
     "rebalance": check_rebalance,
     "rebalance_projection": check_rebalance_projection,
+    "extra_work": check_extra_work,
     "refusals": check_refusals,
     "empty_rank": check_empty_rank,
 }
