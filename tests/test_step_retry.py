@@ -113,13 +113,16 @@ def test_the_redone_steps_are_in_the_diagnostics():
 def test_a_step_that_fails_at_the_impact_is_redone_and_the_run_goes_on(tmp_path):
     """cases/dam_break.toml (5 mm) with the MPS number density in the source (kernel =
     "mps", the default until the smooth measure) and steps longer than the default's (cfl
-    0.8): at the impact on the far wall (t = 0.355 s) a step lets a particle at the corner
-    into the wall (9 such steps on 2 ranks); each is redone at half its dt and the run goes
-    on. (At the default cfl 0.5 such a step came once, until the work-weighted balance moved
-    the slab edge and, with it, the round-off; since then that run needs no redo.)"""
+    0.8, dt_max 2 ms): at the impact on the far wall (t = 0.36 s) a particle is kicked to
+    several times the speed the step was sized for (Courant 7 on 2 ranks); each such step
+    is redone at half its dt and the run goes on. (With dt_max at its default 1 ms, steps
+    at the impact had let a particle at the corner into the wall, 9 redone steps, until
+    the wall collisions closed a wall layer's gaps above its plane: that run no longer
+    needs a redo.)"""
     out = tmp_path / "out"
     result = run_parmps([CASES / "dam_break.toml", "-o", out, "--end-time", "0.37",
-                         "--set", 'mps.density.kernel="mps"', "--set", "time.cfl=0.8"],
+                         "--set", 'mps.density.kernel="mps"', "--set", "time.cfl=0.8",
+                         "--set", "time.dt_max=0.002"],
                         ranks=2, timeout=300)
     assert result.returncode == 0, error_lines(result.stderr) or result.stderr[-2000:]
     with parmps.open_result(out) as run:
