@@ -23,7 +23,7 @@ def part_targets(total, parts, extra=None):
         return total * (np.arange(1, parts) / parts)
     share = np.maximum((total + float(np.sum(extra))) / parts - np.asarray(extra, float), 0.0)
     # A part whose extra alone exceeds the mean takes no particles; the others share them.
-    share *= total / share.sum() if share.sum() > 0 else 0.0
+    share *= (total / share.sum()) if share.sum() > 0 else 0.0
     return np.cumsum(share)[:-1]
 
 

@@ -228,12 +228,12 @@ class BlockDecomposition(Decomposition):
         for k, g in enumerate(grid):
             groups = int(np.prod(grid[:k], dtype=np.int64))
             level = np.empty((groups, g + 1))
+            extra = self._extra_of_parts(grid, k)
             for index in range(groups):
                 values = position[group == index, k]
                 order = np.argsort(values, kind="stable")
                 level[index] = gap_quantiles(values[order], g, self.lower[k], self.upper[k],
-                                             weights[group == index][order],
-                                             self._extra_of_parts(grid, k)[index])
+                                             weights[group == index][order], extra[index])
             cuts.append(level)
             interior = level[group][:, 1:-1]
             group = group * g + np.count_nonzero(position[:, k:k + 1] >= interior, axis=1)
