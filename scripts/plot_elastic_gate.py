@@ -1,13 +1,13 @@
 #!/usr/bin/env python3
 """Plot the elastic gate's free-end displacement and snapshots of a run of cases/elastic_gate.toml.
 
-    scripts/plot_elastic_gate.py OUT [--png docs/elastic_gate.png] [--experiment FILE.csv]
+    scripts/plot_elastic_gate.py OUT [--png docs/elastic_gate.png]
 
 OUT is the run's output directory (or its result.h5). The upper panel is the free end's
 horizontal and vertical displacement (the displacement probe, every step; the
 validation's metric, validation/elastic_gate/), with the crossings of the gate counted
-every step; the lower row shows the particles at four times. ``--experiment`` adds a
-measured curve: a CSV with columns t [s], dx [m], dy [m] (either may be empty).
+every step, beside the experiment's points (the validation's references: Antoci et al.'s
+measured free-end displacement); the lower row shows the particles at four times.
 """
 
 import argparse
@@ -41,7 +41,6 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("output", help="the run's output directory or its result.h5")
     parser.add_argument("--png", default=os.path.join(ROOT, "docs", "elastic_gate.png"))
-    parser.add_argument("--experiment", default=None, help="CSV: t, dx, dy (measured)")
     args = parser.parse_args()
 
     import matplotlib
@@ -60,14 +59,13 @@ def main():
     ax.plot(measured["time"], 1e3 * measured["dx"], color="C0",
             label="horizontal (parmps)")
     ax.plot(measured["time"], 1e3 * measured["dy"], color="C1", label="vertical (parmps)")
-    if args.experiment:
-        data = np.genfromtxt(args.experiment, delimiter=",", comments="#", names=True)
-        columns = data.dtype.names
-        ax.plot(data[columns[0]], 1e3 * data[columns[1]], "o", color="C0", ms=3,
-                label="horizontal (experiment)")
-        if len(columns) > 2:
-            ax.plot(data[columns[0]], 1e3 * data[columns[2]], "s", color="C1", ms=3,
-                    label="vertical (experiment)")
+    references = check.metric_arguments.get("references", {})
+    for component, color, marker in (("dx", "C0", "o"), ("dy", "C1", "s")):
+        if component in references:
+            t_ref, v_ref = list(analysis.reference_table(references[component]).values())[:2]
+            ax.plot(t_ref, 1e3 * v_ref, marker, color=color, ms=4,
+                    label=("horizontal" if component == "dx" else "vertical")
+                    + " (experiment, Antoci et al. 2007)")
     ax.set_xlabel("t [s]")
     ax.set_ylabel("free-end displacement [mm]")
     ax.grid(alpha=0.3)
@@ -76,10 +74,9 @@ def main():
     ax.set_title(f"elastic gate (Antoci et al. 2007 set-up), l0 = {1e3 * spacing:.3g} mm: "
                  f"max dx = {1e3 * measured['dx_max']:.1f} mm at t = "
                  f"{measured['t_dx_max']:.3f} s; fluid crossings {measured['crossings']}, "
-                 f"max area error {measured['volume_error']:.1e}", fontsize=9)
-    if not args.experiment:
-        ax.text(0.99, 0.03, "the experiment's curve is not among the reference data",
-                transform=ax.transAxes, ha="right", fontsize=7, color="0.4")
+                 f"max area error {measured['volume_error']:.1e}\nagainst the experiment: peak "
+                 f"{100 * measured.get('dx_peak_error', np.nan):+.0f} %, RMS "
+                 f"{100 * measured.get('dx_rms_error', np.nan):.0f} % of its peak", fontsize=9)
     end = measured["end"]
     for k, (t, fluid, nodes, walls) in enumerate(frames_near(path, np.linspace(0.1, 1.0, 4)
                                                              * end)):

@@ -1,10 +1,11 @@
 """Water column released through an elastic rubber gate (validation/elastic_gate/), on 2 ranks.
 
-cases/elastic_gate.toml to 0.4 s: no fluid particle's path crosses the gate's mid-line
-(counted every step by the body_crossing check), the area constraint holds, the free end's
-displacement is in the output every step, and the run reaches its end. Antoci et al.'s measured
-tip curve is not among the shared reference data, so the curve is reported (README,
-docs/elastic_gate.png), not judged. About 12 minutes on 2 ranks of a shared 2-core machine.
+cases/elastic_gate.toml, at the defaults, to 0.4 s: no fluid particle's path crosses the gate's
+mid-line (counted every step by the body_crossing check), the area constraint holds, the free
+end's displacement is in the output every step, and the run reaches its end. The comparison
+with Antoci et al.'s measured free-end curve (the validation's references) is computed here and
+judged by `python -m parmps validate elastic_gate`, whose targets (peak within 15 %, RMS within
+20 % of the peak) the defaults do not meet (README, "Measured"). About a minute on 2 ranks.
 """
 
 import numpy as np
@@ -12,17 +13,18 @@ import pytest
 
 from conftest import run_parmps
 from parmps import validation
+from parmps.tools import analysis
 
 CHECK = validation.load("elastic_gate")
 
 
 @pytest.mark.mpi
 @pytest.mark.slow
-@pytest.mark.timeout(2400)
+@pytest.mark.timeout(900)
 def test_gate_holds_the_water_back_to_0_4_s_on_two_ranks(tmp_path):
     end = CHECK.run["end_time"]
     result = run_parmps([CHECK.case_path, "-o", tmp_path, "--end-time", str(end)], ranks=2,
-                        timeout=2300)
+                        timeout=800)
     assert result.returncode == 0, result.stderr[-3000:]
     measured = CHECK.measure(tmp_path / "result.h5")
     assert measured["end"] == pytest.approx(end, abs=1e-9)
@@ -31,3 +33,30 @@ def test_gate_holds_the_water_back_to_0_4_s_on_two_ranks(tmp_path):
     # The tip series has a row every step, and the water opens the gate downstream (+x).
     assert len(measured["time"]) > 100 and np.all(np.isfinite(measured["dx"]))
     assert measured["dx_max"] > 0.0
+    for component in ("dx", "dy"):
+        assert np.isfinite(measured[f"{component}_peak_error"])
+        assert 0.0 < measured[f"{component}_rms_error"] < 1.0
+
+
+def test_the_curve_errors_are_relative_to_the_records_peak():
+    # A record peaking at 2 at t = 1; a run 10 % low everywhere: peak -10 %, and an RMS
+    # of 0.1 times the record's RMS over its peak. A run that ends at t = 1 is compared
+    # at the record's points it reached.
+    t_ref = np.array([0.0, 0.5, 1.0, 1.5])
+    v_ref = np.array([0.0, 1.0, 2.0, 1.0])
+    time = np.linspace(0.0, 1.5, 301)
+    value = 0.9 * np.interp(time, t_ref, v_ref)
+    peak, rms = analysis.curve_errors(time, value, t_ref, v_ref)
+    assert peak == pytest.approx(-0.1, abs=1e-12)
+    assert rms == pytest.approx(0.1 * np.sqrt(np.mean(v_ref ** 2)) / 2.0, rel=1e-12)
+    short = time <= 1.0
+    _, rms_short = analysis.curve_errors(time[short], value[short], t_ref, v_ref)
+    assert rms_short == pytest.approx(0.1 * np.sqrt(np.mean(v_ref[:3] ** 2)) / 2.0, rel=1e-12)
+
+
+def test_the_validation_reads_the_experiments_two_curves():
+    references = CHECK.metric_arguments["references"]
+    for component in ("dx", "dy"):
+        t_ref, v_ref = list(analysis.reference_table(references[component]).values())[:2]
+        assert len(t_ref) == 9 and np.all(np.diff(t_ref) > 0) and t_ref[-1] < 0.4
+    assert CHECK.tolerance["dx_peak_error"] == 0.15 and CHECK.tolerance["dx_rms_error"] == 0.2

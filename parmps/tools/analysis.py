@@ -515,14 +515,20 @@ def kirchhoff_plate(path, case, body="plate"):
     return elastic_3d.clamped_plate_deflection(shape, spacing, spec, pressure)
 
 
-def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate"):
+def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate",
+                 references=None):
     """The elastic gate's run (validation/elastic_gate/): its free end's displacement from
     the displacement probe, the fluid crossings of the body_crossing check, the body's
     largest area error and how far the run got.
 
+    ``references``: component ("dx", "dy") -> CSV of the measured (t, displacement); each
+    gives ``<component>_peak_error`` (the run's largest value against the record's, relative
+    to the record's) and ``<component>_rms_error`` (the RMS difference at the record's times
+    that the run reached, relative to the record's peak).
+
     Returns a dict: time, dx, dy (the tip series), dx_max and t_dx_max (the largest
     horizontal opening and when), dy_max (the largest rise), crossings (their total),
-    volume_error (largest |A - A0|/A0) and end (the last step's time).
+    volume_error (largest |A - A0|/A0), end (the last step's time) and the errors above.
     """
     time, value = read_probe(path, probe)
     with open_result(path) as result:
@@ -530,10 +536,28 @@ def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate
         end = float(result.diagnostics["time"][-1])
     error = float(np.abs(solid_series(path, body)["volume_error"]).max())
     peak = int(np.argmax(value[:, 0]))
-    return {"time": time, "dx": value[:, 0], "dy": value[:, 1],
-            "dx_max": float(value[peak, 0]), "t_dx_max": float(time[peak]),
-            "dy_max": float(value[:, 1].max()), "crossings": int(total[-1]) if len(total) else 0,
-            "volume_error": error, "end": end}
+    measured = {"time": time, "dx": value[:, 0], "dy": value[:, 1],
+                "dx_max": float(value[peak, 0]), "t_dx_max": float(time[peak]),
+                "dy_max": float(value[:, 1].max()),
+                "crossings": int(total[-1]) if len(total) else 0,
+                "volume_error": error, "end": end}
+    for component, reference in (references or {}).items():
+        t_ref, v_ref = list(reference_table(reference).values())[:2]
+        peak_error, rms_error = curve_errors(time, measured[component], t_ref, v_ref)
+        measured[f"{component}_peak_error"] = peak_error
+        measured[f"{component}_rms_error"] = rms_error
+    return measured
+
+
+def curve_errors(time, value, t_ref, v_ref):
+    """A simulated series against a measured one: (the series' largest value over the
+    record's largest, less 1; the RMS difference at the record's times the series reached,
+    interpolated linearly, over the record's largest)."""
+    reached = t_ref <= time[-1]
+    scale = float(np.max(v_ref))
+    simulated = np.interp(t_ref[reached], time, value)
+    return (float(np.max(value) / scale - 1.0),
+            float(np.sqrt(np.mean((simulated - v_ref[reached]) ** 2)) / scale))
 
 
 def carried_body(path, case, body="box", check=None):
