@@ -110,7 +110,7 @@ def test_collisions_conserve_momentum_between_moving_particles(scene):
     full_indptr, full_cols = pair_list(squeezed, 3.7 * SPACING)
     moving = np.ones(len(position), bool)
     change = kernels.collision_change(full_indptr, full_cols, squeezed, velocity, moving,
-                                      0.5 * SPACING, 0.2, len(position))
+                                      0.5 * SPACING, 0.2, len(position), squeezed)
     assert np.abs(change).max() > 0
     assert change.shape == position.shape
     np.testing.assert_allclose(change.sum(axis=0), 0.0, atol=1e-12)
@@ -206,10 +206,10 @@ def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene
     assert values[row_ptr[centre_row]] - 0.45 > 5 * (plain[2][plain[0][centre_row]] - 0.45)
 
 
-def reference_collisions(position, velocity, moving, limit, restitution, n_rows):
+def reference_collisions(position, velocity, moving, limit, restitution, n_rows, start):
     """collision_change written in numpy: moving pairs pair by pair; the fixed partners
-    within their reach (sqrt(d - 1 + 1/4) times the limit) as one wall along their
-    overlap-weighted contact normal."""
+    within their reach (sqrt(d - 1 + 1/4) times the limit) as one wall along the normal
+    of every fixed partner within twice that reach at ``start``, weighted (1 - r/R)^2."""
     out = np.zeros((n_rows, position.shape[1]))
     fixed_reach = limit * np.sqrt(position.shape[1] - 1 + kernels.WALL_GAP_CLOSURE ** 2)
     reach = np.where(moving, limit, fixed_reach)
@@ -225,7 +225,14 @@ def reference_collisions(position, velocity, moving, limit, restitution, n_rows)
         wall = close & ~moving
         if wall.any():
             weight = 1.0 - r[wall] / fixed_reach
-            contact = (weight[:, None] * offset[wall] / r[wall, None]).sum(axis=0)
+            offset_start = start - start[i]
+            r_start = np.linalg.norm(offset_start, axis=1)
+            support = kernels.WALL_NORMAL_REACH * fixed_reach
+            around = ~moving & (r_start > 0) & (r_start < support)
+            contact = (((1.0 - r_start[around] / support) ** 2 / r_start[around])[:, None]
+                       * offset_start[around]).sum(axis=0)
+            if np.linalg.norm(contact) <= 1e-12:
+                contact = (weight[:, None] * offset[wall] / r[wall, None]).sum(axis=0)
             contact /= np.linalg.norm(contact)
             wall_velocity = (weight[:, None] * velocity[wall]).sum(axis=0) / weight.sum()
             approach = (velocity[i] - wall_velocity) @ contact
@@ -239,11 +246,49 @@ def test_collisions_match_pairwise_reference(scene):
     squeezed = position * 0.6
     indptr, cols = pair_list(squeezed, 3.7 * SPACING, n_rows=n)
     moving = ~is_dummy
-    change = kernels.collision_change(indptr, cols, squeezed, velocity, moving, 0.5 * SPACING,
-                                      0.2, n)
-    expected = reference_collisions(squeezed, velocity, moving, 0.5 * SPACING, 0.2, n)
-    assert np.count_nonzero(np.any(expected != 0, axis=1)) > 10
-    np.testing.assert_allclose(change, expected, rtol=1e-10, atol=1e-14)
+    # The start of the step: a step of the velocities back, so the fixed partners'
+    # directions there differ from those at the predicted positions.
+    start = squeezed - 0.05 * velocity
+    for begin in (squeezed, start):
+        change = kernels.collision_change(indptr, cols, squeezed, velocity, moving,
+                                          0.5 * SPACING, 0.2, n, begin)
+        expected = reference_collisions(squeezed, velocity, moving, 0.5 * SPACING, 0.2, n,
+                                        begin)
+        assert np.count_nonzero(np.any(expected != 0, axis=1)) > 10
+        np.testing.assert_allclose(change, expected, rtol=1e-10, atol=1e-14)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_fast_droplet_aimed_at_a_walls_gap_is_turned_back(dimension):
+    """A wall of two layers (a square lattice of spacing l0, its front layer in the plane
+    x = 0) and a droplet flying at it along -x, a tenth of a spacing off the centre of a
+    gap between the front layer's particles, from 0.49 l0 in front of the plane, beyond
+    the fixed partners' reach of its gap. A step of half a spacing (Courant 0.5) lands
+    it in the plane, half a spacing from the gap's particles on either side: seen from
+    there they lie sideways, and their combined normal would hardly slow it. From where
+    it came, over the partners on both sides of the gap, the wall lies ahead: it must be
+    turned back, its approach reversed with nearly the restitution, and the correction
+    must take it back in front of the plane."""
+    g = np.meshgrid(np.arange(-1.0, 1.0), *[np.arange(-3.0, 4.0)] * (dimension - 1),
+                    indexing="ij")
+    wall = np.column_stack([axis.ravel() for axis in g])
+    start = np.vstack([np.r_[0.49, np.full(dimension - 1, 0.6)], wall])
+    speed, dt = 1.0, 0.5
+    velocity = np.zeros_like(start)
+    velocity[0, 0] = -speed
+    position = start.copy()
+    position[0] += dt * velocity[0]
+    moving = np.r_[True, np.zeros(len(wall), bool)]
+    indptr, cols = pair_list(position, 1.5, n_rows=1)
+    change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                                      start)
+    after = velocity[0] + change[0]
+    assert after[0] > 0.1 * speed
+    assert position[0, 0] + dt * change[0, 0] > 0.0
+    # At the predicted positions alone the normal lies nearly in the plane.
+    static = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                                      position)
+    assert velocity[0, 0] + static[0, 0] < 0.0
 
 
 @pytest.mark.parametrize("dimension", [2, 3])
@@ -266,10 +311,12 @@ def test_a_droplet_resting_on_a_wall_does_not_sink_down_its_gaps(dimension):
     dt, gravity = 0.002, 9.81 / 0.025
     lowest = np.inf
     for _ in range(3000):
+        start = position.copy()
         velocity[0, -1] -= dt * gravity
         position[0] += dt * velocity[0]
         indptr, cols = pair_list(position, 1.5, n_rows=1)
-        change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1)
+        change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                                          start)
         velocity[0] += change[0]
         position[0] += dt * change[0]
         lowest = min(lowest, position[0, -1])

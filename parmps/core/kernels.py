@@ -504,10 +504,15 @@ def correct_normal_component(indptr, cols, position, has_pressure, radius, scale
 # a spacing at the default 0.5 l0, a margin a step's overshoot does not cross.
 WALL_GAP_CLOSURE = 0.5
 
+# The support of a wall's contact normal, in fixed-partner reaches: twice it (1.1 l0 in
+# 2D, 1.5 l0 in 3D at the default collision distance) spans a wall layer's gap from half
+# a spacing in front of it.
+WALL_NORMAL_REACH = 2.0
+
 
 @numba.njit(cache=True, inline="always")
 def _collision_change(indptr, cols, position, velocity, moving, distance_limit, restitution,
-                      n_rows, d):
+                      n_rows, d, start):
     out = np.zeros((n_rows, d))
     limit2 = distance_limit * distance_limit
     # A wall layer is a (d-1)-dimensional square lattice: the centre of its widest gap lies
@@ -518,20 +523,35 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
     # collisions themselves steer it into.
     fixed_limit2 = limit2 * ((d - 1) + WALL_GAP_CLOSURE * WALL_GAP_CLOSURE)
     fixed_limit = np.sqrt(fixed_limit2)
+    normal_reach = WALL_NORMAL_REACH * fixed_limit
+    normal_reach2 = normal_reach * normal_reach
     normal = np.zeros(d)
+    contact = np.zeros(d)
     wall_velocity = np.zeros(d)
     for i in range(n_rows):
         if not moving[i]:
             continue
-        # Fixed partners act together, as one wall: their contact normal is the
-        # overlap-weighted sum of their directions to i. Pair by pair, the partners around
-        # a gap each see a glancing approach and together do not stop the particle.
+        # Fixed partners act together, as one wall: any within reach at the predicted
+        # position makes a contact, and the wall's normal is the weighted sum of the
+        # directions to every fixed partner within twice that reach at the start of the
+        # step. Pair by pair, the partners around a gap each see a glancing approach and
+        # together do not stop the particle; and a fast particle predicted to land in a
+        # wall layer's plane, between two of its particles, sees them only sideways there:
+        # from where it came, and over a support that spans the gap, the wall lies ahead.
         weight_sum = 0.0
         for k in range(d):
             normal[k] = 0.0
+            contact[k] = 0.0
             wall_velocity[k] = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
+            if not moving[j]:
+                s2 = pair_distance2(start, i, j, d)
+                if 0.0 < s2 < normal_reach2:
+                    r_start = np.sqrt(s2)
+                    weight = (1.0 - r_start / normal_reach) ** 2
+                    for k in range(d):
+                        normal[k] += weight * (pair_component(start, i, j, k) / r_start)
             r2 = pair_distance2(position, i, j, d)
             if r2 >= (limit2 if moving[j] else fixed_limit2) or r2 <= 0.0:
                 continue
@@ -540,7 +560,7 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
                 weight = 1.0 - r / fixed_limit
                 weight_sum += weight
                 for k in range(d):
-                    normal[k] += weight * (pair_component(position, i, j, k) / r)
+                    contact[k] += weight * (pair_component(position, i, j, k) / r)
                     wall_velocity[k] += weight * velocity[j, k]
                 continue
             # The unit vector r_ij / r, component by component.
@@ -559,8 +579,17 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
         for k in range(d):
             length += normal[k] * normal[k]
         length = np.sqrt(length)
-        if length <= 1e-12 * weight_sum:
-            continue
+        if length <= 1e-12:
+            # No fixed partner around where the particle started (a step longer than the
+            # support): the contacts' own directions, overlap-weighted.
+            for k in range(d):
+                normal[k] = contact[k]
+            length = 0.0
+            for k in range(d):
+                length += normal[k] * normal[k]
+            length = np.sqrt(length)
+            if length <= 1e-12 * weight_sum:
+                continue
         approach = 0.0
         for k in range(d):
             approach += (velocity[i, k] - wall_velocity[k] / weight_sum) * (normal[k] / length)
@@ -574,19 +603,22 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
 
 @numba.njit(cache=True)
 def collision_change(indptr, cols, position, velocity, moving, distance_limit, restitution,
-                     n_rows):
-    """Velocity changes of moving particles from collisions closer than ``distance_limit``.
+                     n_rows, start):
+    """Velocity changes of moving particles from collisions closer than ``distance_limit``
+    at ``position`` (the predicted positions).
 
     Uses pre-collision velocities only, so the result is independent of pair order:
     two moving particles share the impulse; the fixed partners within reach act as one
-    infinitely heavy wall along their combined contact normal.
+    infinitely heavy wall along the normal of the fixed partners around the particle at
+    ``start`` (the positions at the start of the step; ``position`` again for a static
+    check).
     """
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
         return _collision_change(indptr, cols, position, velocity, moving, distance_limit,
-                                 restitution, n_rows, 2)
+                                 restitution, n_rows, 2, start)
     return _collision_change(indptr, cols, position, velocity, moving, distance_limit,
-                             restitution, n_rows, 3)
+                             restitution, n_rows, 3, start)
 
 
 # A row of the pressure matrix that is an unknown free-surface particle (is_unknown's value).

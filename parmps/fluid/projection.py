@@ -165,7 +165,7 @@ class FluidSolver:
             timers.start("operators")
             change = kernels.collision_change(indptr, cols, position_star, velocity_star,
                                               self.moving(kind), self.collision_distance,
-                                              self.restitution, n)
+                                              self.restitution, n, position)
             velocity_star[:n] += change
             position_star[:n] += dt * change
             timers.start("halo")
