@@ -511,6 +511,14 @@ WALL_NORMAL_REACH = 2.0
 
 
 @numba.njit(cache=True, inline="always")
+def _length(vector, d):
+    total = 0.0
+    for k in range(d):
+        total += vector[k] * vector[k]
+    return np.sqrt(total)
+
+
+@numba.njit(cache=True, inline="always")
 def _collision_change(indptr, cols, position, velocity, moving, distance_limit, restitution,
                       n_rows, d, start):
     out = np.zeros((n_rows, d))
@@ -545,13 +553,6 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
             wall_velocity[k] = 0.0
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
-            if not moving[j]:
-                s2 = pair_distance2(start, i, j, d)
-                if 0.0 < s2 < normal_reach2:
-                    r_start = np.sqrt(s2)
-                    weight = (1.0 - r_start / normal_reach) ** 2
-                    for k in range(d):
-                        normal[k] += weight * (pair_component(start, i, j, k) / r_start)
             r2 = pair_distance2(position, i, j, d)
             if r2 >= (limit2 if moving[j] else fixed_limit2) or r2 <= 0.0:
                 continue
@@ -575,19 +576,25 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
                 out[i, k] -= impulse * (pair_component(position, i, j, k) / r)
         if weight_sum <= 0.0:
             continue
-        length = 0.0
-        for k in range(d):
-            length += normal[k] * normal[k]
-        length = np.sqrt(length)
+        # Only a particle in contact needs the wall's normal: a second pass over its fixed
+        # partners, at the start of the step.
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if moving[j]:
+                continue
+            s2 = pair_distance2(start, i, j, d)
+            if 0.0 < s2 < normal_reach2:
+                r_start = np.sqrt(s2)
+                weight = (1.0 - r_start / normal_reach) ** 2
+                for k in range(d):
+                    normal[k] += weight * (pair_component(start, i, j, k) / r_start)
+        length = _length(normal, d)
         if length <= 1e-12:
             # No fixed partner around where the particle started (a step longer than the
             # support): the contacts' own directions, overlap-weighted.
             for k in range(d):
                 normal[k] = contact[k]
-            length = 0.0
-            for k in range(d):
-                length += normal[k] * normal[k]
-            length = np.sqrt(length)
+            length = _length(normal, d)
             if length <= 1e-12 * weight_sum:
                 continue
         approach = 0.0
