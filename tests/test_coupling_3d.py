@@ -153,14 +153,102 @@ def test_sides_of_the_plate_beside_beyond_its_edges_and_outside_the_band():
                                   mid_line_sides(two, line, 0.035))
 
 
-def test_the_sides_do_not_depend_on_the_chunks():
+# The check's answer by brute force, every point against every triangle, in numpy: the
+# reference the check's kernel and its grouping of the points are held to.
+def _segment_distance2(points, start, end):
+    """Squared distance of every point (n, 3) to every segment (k) start -> end: (n, k)."""
+    direction = end - start
+    length2 = np.einsum("ij,ij->i", direction, direction)
+    offset = points[:, None, :] - start[None, :, :]
+    along = np.clip(np.einsum("nkj,kj->nk", offset, direction) / length2, 0.0, 1.0)
+    gap = offset - along[..., None] * direction[None, :, :]
+    return np.einsum("nkj,nkj->nk", gap, gap)
+
+
+def _triangle_distance2(points, a, b, c):
+    """Squared distance of every point (n, 3) to every triangle (m) abc, and the signed
+    height of the point over each triangle's plane along its normal (b - a) x (c - a)."""
+    normal = np.cross(b - a, c - a)
+    unit = normal / np.linalg.norm(normal, axis=1)[:, None]
+    offset = points[:, None, :] - a[None, :, :]
+    height = np.einsum("nmj,mj->nm", offset, unit)
+    foot = offset - height[..., None] * unit[None, :, :]
+    # The foot is inside when it lies on the inner side of all three edges.
+    inside = np.ones(height.shape, bool)
+    for p, q in ((a, b), (b, c), (c, a)):
+        edge_normal = np.cross(unit, q - p)
+        inside &= np.einsum("nmj,mj->nm", foot + (a - p)[None], edge_normal) >= 0.0
+    edges = np.minimum(np.minimum(_segment_distance2(points, a, b),
+                                  _segment_distance2(points, b, c)),
+                       _segment_distance2(points, c, a))
+    return np.where(inside, height * height, edges), height
+
+
+def _reference_sides(points, vertices, facets, band):
+    from parmps.checks.crossing import border_edges
+    points = np.asarray(points, dtype=float)
+    border = border_edges(facets)
+    a, b, c = (vertices[facets[:, k]] for k in range(3))
+    distance2, height = _triangle_distance2(points, a, b, c)
+    nearest = np.argmin(distance2, axis=1)
+    rows = np.arange(len(points))
+    surface2 = distance2[rows, nearest]
+    border2 = _segment_distance2(points, vertices[border[:, 0]],
+                                 vertices[border[:, 1]]).min(axis=1)
+    at_border = border2 <= surface2 * (1.0 + 1e-9) + 1e-30
+    beside = ~at_border & (surface2 <= band * band)
+    return np.where(beside, np.where(height[rows, nearest] > 0.0, 1, -1), 0).astype(np.int8)
+
+
+def test_the_sides_are_those_against_every_triangle():
     vertices, facets = lattice_mid_surface(PLATE, (9, 5, 2))
     points = np.random.default_rng(5).uniform([-0.02, -0.02, -0.03], [0.1, 0.06, 0.04],
                                               size=(700, 3))
     whole = mid_surface_sides(points, vertices, facets, PLATE_BAND)
     assert set(np.unique(whole)) == {-1, 0, 1}
-    np.testing.assert_array_equal(
-        mid_surface_sides(points, vertices, facets, PLATE_BAND, chunk=100), whole)
+    np.testing.assert_array_equal(whole, _reference_sides(points, vertices, facets,
+                                                          PLATE_BAND))
+
+
+def test_the_sides_by_cubes_are_the_sides_against_every_triangle():
+    # A wide plate bent into a trough, with points all round it: the cubes of 2 bands and
+    # the triangles near each give every point the side that testing it against every
+    # triangle gives (ties included: the same first triangle).
+    plate = lattice_geometry((21, 15, 2), 0.01, (0.0, 0.0, 0.0)).position.copy()
+    plate[:, 2] += 2.0 * (plate[:, 0] - 0.1) ** 2
+    vertices, facets = lattice_mid_surface(plate, (21, 15, 2))
+    rng = np.random.default_rng(11)
+    points = rng.uniform(vertices.min(axis=0) - 0.03, vertices.max(axis=0) + 0.03,
+                         size=(3000, 3))
+    # Lattice points too: they tie between triangles and sit on cube edges.
+    points = np.concatenate([points, lattice_geometry((25, 19, 7), 0.01,
+                                                       (-0.02, -0.02, -0.03)).position])
+    expected = _reference_sides(points, vertices, facets, PLATE_BAND)
+    sides = mid_surface_sides(points, vertices, facets, PLATE_BAND)
+    assert set(np.unique(expected)) == {-1, 0, 1}
+    np.testing.assert_array_equal(sides, expected)
+
+
+@pytest.mark.parametrize("surface", ["bent gate", "red blood cell"])
+def test_the_fast_winding_number_classifies_as_the_exact_sum(surface):
+    # The coupling counts the fluid inside a body with the patches' far field; off the
+    # surface it is within 0.05 of the exact sum everywhere, so "inside" is the same.
+    from parmps.core.geometry import fast_winding_number, winding_number
+    from parmps.solids.mass_spring.shell import red_blood_cell
+    if surface == "bent gate":
+        body = lattice_geometry((3, 40, 36), 0.0025, (0.1, 0.0, 0.0))
+        vertices, triangles = body.position.copy(), body.boundary
+        vertices[:, 0] += 0.04 * (np.clip(0.08 - vertices[:, 2], 0.0, None) / 0.08) ** 2
+    else:
+        vertices, triangles = red_blood_cell(8.0, frequency=12, center=(0.3, -0.2, 0.1))
+    rng = np.random.default_rng(7)
+    points = rng.uniform(vertices.min(axis=0) - 0.005, vertices.max(axis=0) + 0.005,
+                         size=(4000, 3))
+    exact = winding_number(points, vertices, triangles)
+    fast = fast_winding_number(points, vertices, triangles)
+    assert np.abs(fast - exact).max() < 0.05
+    np.testing.assert_array_equal(fast > 0.5, exact > 0.5)
+    assert 0.02 < np.mean(exact > 0.5) < 0.98
 
 
 def _crossings(path, vertices, facets):

@@ -30,7 +30,9 @@ logs a warning at the first crossing.
 
 import logging
 
+import numba
 import numpy as np
+from scipy.spatial import cKDTree
 
 from parmps.core.particles import FLUID, INFLOW
 from parmps.io.series import Series
@@ -106,43 +108,19 @@ def border_edges(facets):
     return unique[count == 1]
 
 
-def _segment_distance2(points, start, end):
-    """Squared distance of every point (n, 3) to every segment (k) start -> end: (n, k)."""
-    direction = end - start
-    length2 = np.einsum("ij,ij->i", direction, direction)
-    offset = points[:, None, :] - start[None, :, :]
-    along = np.clip(np.einsum("nkj,kj->nk", offset, direction) / length2, 0.0, 1.0)
-    gap = offset - along[..., None] * direction[None, :, :]
-    return np.einsum("nkj,nkj->nk", gap, gap)
-
-
-def _triangle_distance2(points, a, b, c):
-    """Squared distance of every point (n, 3) to every triangle (m) abc, and the signed
-    height of the point over each triangle's plane along its normal (b - a) x (c - a)."""
-    normal = np.cross(b - a, c - a)
-    unit = normal / np.linalg.norm(normal, axis=1)[:, None]
-    offset = points[:, None, :] - a[None, :, :]
-    height = np.einsum("nmj,mj->nm", offset, unit)
-    foot = offset - height[..., None] * unit[None, :, :]
-    # The foot is inside when it lies on the inner side of all three edges.
-    inside = np.ones(height.shape, bool)
-    for p, q in ((a, b), (b, c), (c, a)):
-        edge_normal = np.cross(unit, q - p)
-        inside &= np.einsum("nmj,mj->nm", foot + (a - p)[None], edge_normal) >= 0.0
-    edges = np.minimum(np.minimum(_segment_distance2(points, a, b),
-                                  _segment_distance2(points, b, c)),
-                       _segment_distance2(points, c, a))
-    return np.where(inside, height * height, edges), height
-
-
-def mid_surface_sides(points, vertices, facets, band, chunk=200_000):
+def mid_surface_sides(points, vertices, facets, band):
     """Side of a mid-surface (``vertices`` (v, d), ``facets`` (m, d)) of each of ``points``
     (n, d): -1 or +1, or 0 beyond its border or farther than ``band``. 2D: the mid-line's
     :func:`mid_line_sides` (its vertices run along the line); 3D: the sign of the nearest
     triangle's normal against the point, 0 where the nearest point of the surface lies on
-    its border (a point round its edge, as a 2D point beyond an end). Every point is tested
-    against every triangle, in chunks of about ``chunk`` pairs (a large plate has thousands
-    of triangles)."""
+    its border (a point round its edge, as a 2D point beyond an end).
+
+    Only what lies within ``band`` of a point can decide its side, so the points are taken
+    a cube of side 2 ``band`` at a time, against the triangles and border edges whose boxes
+    come within ``band`` of that cube: the answer of every point against every triangle, in
+    the same order (ties go to the first triangle), at a cost that grows with the surface's
+    area near the points rather than with points x triangles; points far from every vertex
+    are let go first."""
     vertices = np.asarray(vertices, dtype=float)
     d = vertices.shape[1]
     if d == 2:
@@ -150,27 +128,108 @@ def mid_surface_sides(points, vertices, facets, band, chunk=200_000):
     points = np.asarray(points, dtype=float).reshape(-1, d)
     facets = np.asarray(facets, dtype=np.int64)
     sides = np.zeros(len(points), np.int8)
+    if len(points) == 0 or len(facets) == 0:
+        return sides
+    # A point of a triangle lies within the triangle's longest edge of one of its corners:
+    # a point farther than band + that from every vertex is beside no triangle.
+    corners = vertices[facets]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()
+    distance, _ = cKDTree(vertices).query(points, distance_upper_bound=band + longest)
+    candidates = np.flatnonzero(np.isfinite(distance))
+    if len(candidates) == 0:
+        return sides
     border = border_edges(facets)
-    step = max(1, chunk // max(1, len(facets)))
-    for begin in range(0, len(points), step):
-        sides[begin:begin + step] = _surface_sides(points[begin:begin + step], vertices,
-                                                   facets, border, band)
+    triangle_box = _boxes(vertices, facets)
+    edge_box = _boxes(vertices, border)
+    cube = 2.0 * band
+    near_points = points[candidates]
+    key = np.floor((near_points - near_points.min(axis=0)) / cube).astype(np.int64)
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.ravel()
+    order = candidates[np.argsort(group, kind="stable")]
+    group = np.sort(group, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(group) != 0])
+    for rows in np.split(order, starts[1:]):
+        low = points[rows].min(axis=0) - band
+        high = points[rows].max(axis=0) + band
+        near = _overlapping(triangle_box, low, high)
+        if not near.any():
+            continue
+        edges = border[_overlapping(edge_box, low, high)]
+        sides[rows] = _surface_sides(points[rows], vertices, facets[near], edges, band)
     return sides
 
 
+def _boxes(vertices, cells):
+    """The bounding box (lower (m, d), upper (m, d)) of each cell (m, k) of vertex indices."""
+    corners = vertices[cells]
+    return corners.min(axis=1), corners.max(axis=1)
+
+
+def _overlapping(boxes, low, high):
+    """Which of the boxes meet the box [low, high]."""
+    return np.all((boxes[0] <= high) & (boxes[1] >= low), axis=1)
+
+
 def _surface_sides(points, vertices, facets, border, band):
-    """:func:`mid_surface_sides` in 3D for one chunk of points; ``border`` its border edges."""
+    """:func:`mid_surface_sides` in 3D for one group of points against the triangles
+    ``facets`` and border edges ``border`` near them (numba: one pass over the pairs)."""
     a, b, c = (vertices[facets[:, k]] for k in range(3))
-    distance2, height = _triangle_distance2(points, a, b, c)
-    nearest = np.argmin(distance2, axis=1)
-    rows = np.arange(len(points))
-    surface2 = distance2[rows, nearest]
-    border2 = _segment_distance2(points, vertices[border[:, 0]],
-                                 vertices[border[:, 1]]).min(axis=1)
-    # On the border when no interior point of the surface is nearer than it (rounding aside).
-    at_border = border2 <= surface2 * (1.0 + 1e-9) + 1e-30
-    beside = ~at_border & (surface2 <= band * band)
-    return np.where(beside, np.where(height[rows, nearest] > 0.0, 1, -1), 0).astype(np.int8)
+    normal = np.cross(b - a, c - a)
+    unit = normal / np.linalg.norm(normal, axis=1)[:, None]
+    # The inward normals of each triangle's edges ab, bc, ca within its plane.
+    edge_normal = np.stack([np.cross(unit, b - a), np.cross(unit, c - b),
+                            np.cross(unit, a - c)], axis=1)
+    return _sides_kernel(np.ascontiguousarray(points, dtype=float), a, b, c, unit, edge_normal,
+                         vertices[border[:, 0]], vertices[border[:, 1]], float(band))
+
+
+@numba.njit(cache=True)
+def _segment2(p, start, end):
+    """Squared distance of the point p to the segment start -> end."""
+    d0, d1, d2 = end[0] - start[0], end[1] - start[1], end[2] - start[2]
+    o0, o1, o2 = p[0] - start[0], p[1] - start[1], p[2] - start[2]
+    along = (o0 * d0 + o1 * d1 + o2 * d2) / (d0 * d0 + d1 * d1 + d2 * d2)
+    along = min(max(along, 0.0), 1.0)
+    g0, g1, g2 = o0 - along * d0, o1 - along * d1, o2 - along * d2
+    return g0 * g0 + g1 * g1 + g2 * g2
+
+
+@numba.njit(cache=True)
+def _sides_kernel(points, a, b, c, unit, edge_normal, start, end, band):
+    sides = np.zeros(len(points), np.int8)
+    for i in range(len(points)):
+        p = points[i]
+        best, height = np.inf, 0.0
+        for t in range(len(a)):
+            o0, o1, o2 = p[0] - a[t, 0], p[1] - a[t, 1], p[2] - a[t, 2]
+            h = o0 * unit[t, 0] + o1 * unit[t, 1] + o2 * unit[t, 2]
+            f0, f1, f2 = o0 - h * unit[t, 0], o1 - h * unit[t, 1], o2 - h * unit[t, 2]
+            # The foot is inside when it lies on the inner side of all three edges.
+            inside = True
+            for e in range(3):
+                corner = a[t] if e == 0 else (b[t] if e == 1 else c[t])
+                r0 = f0 + a[t, 0] - corner[0]
+                r1 = f1 + a[t, 1] - corner[1]
+                r2 = f2 + a[t, 2] - corner[2]
+                if (r0 * edge_normal[t, e, 0] + r1 * edge_normal[t, e, 1]
+                        + r2 * edge_normal[t, e, 2]) < 0.0:
+                    inside = False
+            if inside:
+                distance2 = h * h
+            else:
+                distance2 = min(min(_segment2(p, a[t], b[t]), _segment2(p, b[t], c[t])),
+                                _segment2(p, c[t], a[t]))
+            if distance2 < best:  # the first nearest triangle, as argmin
+                best, height = distance2, h
+        border2 = np.inf
+        for k in range(len(start)):
+            border2 = min(border2, _segment2(p, start[k], end[k]))
+        # On the border when no interior point of the surface is nearer than it (rounding aside).
+        at_border = border2 <= best * (1.0 + 1e-9) + 1e-30
+        if not at_border and best <= band * band:
+            sides[i] = 1 if height > 0.0 else -1
+    return sides
 
 
 def count_crossings(previous_ids, previous_sides, ids, sides):

@@ -1,7 +1,16 @@
 """Small geometric predicates shared by the scene, the guards, the coupling and the
 post-processing."""
 
+import numba
 import numpy as np
+
+# A patch of triangles seen from farther than this many times its radius counts as its
+# dipole (below): the first neglected term is of relative size (radius / distance)^2, 1/16.
+FAR_FIELD_RATIO = 4.0
+# The patches' side in mean edges: smaller patches have nearer far fields but more of them
+# to visit; 1.5 was the fastest of 1, 1.5, 2, 3 and 4 on a bent 3D gate (6052 triangles,
+# 20,000 points: 0.17 s against 20 s for the exact sum, the winding number within 0.02).
+PATCH_EDGES = 1.5
 
 
 def outside_box(points, lower, upper):
@@ -54,11 +63,84 @@ def winding_number(points, vertices, triangles, chunk=200_000):
     return out
 
 
+def fast_winding_number(points, vertices, triangles, patch=None):
+    """:func:`winding_number` in a time that grows with the surface's area near each point,
+    not with all its triangles (the fast winding number of Barill et al. 2018, to first
+    order). The triangles are grouped into patches by their centroids' cells of side
+    ``patch`` (default: PATCH_EDGES times the mean edge); a patch seen from farther than
+    FAR_FIELD_RATIO times its radius adds the solid angle of its vector area at its centroid,
+    A n . (c - p) / |c - p|^3, nearer ones add each triangle's exact solid angle.
+
+    The far patches' error is of order (radius / distance)^2 of their solid angle, a few
+    hundredths of the winding number at most; off the surface the winding number of a
+    closed surface is 0 or 1, so ``> 1/2`` classifies as the exact sum does."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    vertices = np.asarray(vertices, dtype=float)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    corners = vertices[triangles]
+    centroid = corners.mean(axis=1)
+    if patch is None:
+        edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+        patch = PATCH_EDGES * float(edges.mean()) if len(edges) else 1.0
+    key = np.floor(centroid / patch).astype(np.int64)
+    _, cell = np.unique(key, axis=0, return_inverse=True)
+    cell = cell.ravel()
+    order = np.argsort(cell, kind="stable")
+    corners, cell = corners[order], cell[order]
+    starts = np.flatnonzero(np.r_[True, np.diff(cell) != 0, True])
+    area = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    patch_area = np.add.reduceat(area, starts[:-1], axis=0)
+    weight = np.linalg.norm(area, axis=1)
+    # The patch's centre: its triangles' centroids weighted by area (the mean if degenerate).
+    total = np.add.reduceat(weight, starts[:-1])
+    weighted = np.add.reduceat(centroid[order] * weight[:, None], starts[:-1], axis=0)
+    plain = np.add.reduceat(centroid[order], starts[:-1], axis=0) / np.diff(starts)[:, None]
+    centre = np.where(total[:, None] > 0.0, weighted / np.where(total > 0.0, total, 1.0)[:, None],
+                      plain)
+    reach = np.linalg.norm(corners - np.repeat(centre, np.diff(starts), axis=0)[:, None, :],
+                           axis=2).max(axis=1)
+    radius = np.maximum.reduceat(reach, starts[:-1])
+    return _fast_winding(points, corners, starts, centre, patch_area, radius,
+                         FAR_FIELD_RATIO)
+
+
+@numba.njit(cache=True)
+def _fast_winding(points, corners, starts, centre, patch_area, radius, ratio):
+    out = np.empty(len(points))
+    for i in range(len(points)):
+        px, py, pz = points[i, 0], points[i, 1], points[i, 2]
+        total = 0.0
+        for q in range(len(centre)):
+            dx, dy, dz = centre[q, 0] - px, centre[q, 1] - py, centre[q, 2] - pz
+            d2 = dx * dx + dy * dy + dz * dz
+            far = ratio * radius[q]
+            if d2 > far * far:
+                total += (patch_area[q, 0] * dx + patch_area[q, 1] * dy
+                          + patch_area[q, 2] * dz) / (d2 * np.sqrt(d2))
+                continue
+            for t in range(starts[q], starts[q + 1]):
+                ax, ay, az = corners[t, 0, 0] - px, corners[t, 0, 1] - py, corners[t, 0, 2] - pz
+                bx, by, bz = corners[t, 1, 0] - px, corners[t, 1, 1] - py, corners[t, 1, 2] - pz
+                cx, cy, cz = corners[t, 2, 0] - px, corners[t, 2, 1] - py, corners[t, 2, 2] - pz
+                la = np.sqrt(ax * ax + ay * ay + az * az)
+                lb = np.sqrt(bx * bx + by * by + bz * bz)
+                lc = np.sqrt(cx * cx + cy * cy + cz * cz)
+                det = (ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz)
+                       + az * (bx * cy - by * cx))
+                if det == 0.0:  # edge-on, as in winding_number
+                    continue
+                den = (la * lb * lc + (ax * bx + ay * by + az * bz) * lc
+                       + (bx * cx + by * cy + bz * cz) * la + (cx * ax + cy * ay + cz * az) * lb)
+                total += 2.0 * np.arctan2(det, den)
+        out[i] = total / (4.0 * np.pi)
+    return out
+
+
 def inside_boundary(points, vertices, facets):
     """Whether each of ``points`` (k, d) lies inside the closed boundary given as
     ``facets`` (m, d) of node indices into ``vertices`` (n, d): in 2D edges (the even-odd
     rule; a loop's edges give :func:`point_in_polygon`'s answer bit for bit), in 3D
-    outward triangles (the winding number above one half)."""
+    outward triangles (the winding number above one half, :func:`fast_winding_number`)."""
     points = np.asarray(points, dtype=float)
     vertices = np.asarray(vertices, dtype=float)
     facets = np.asarray(facets, dtype=np.int64)
@@ -68,7 +150,7 @@ def inside_boundary(points, vertices, facets):
     if d == 2:
         return _even_odd(points, vertices[facets[:, 0]], vertices[facets[:, 1]])
     if d == 3:
-        return winding_number(points, vertices, facets) > 0.5
+        return fast_winding_number(points, vertices, facets) > 0.5
     raise ValueError(f"inside_boundary: no inside test for dimension {d}")
 
 
