@@ -60,3 +60,55 @@ def test_the_validation_reads_the_experiments_two_curves():
         t_ref, v_ref = list(analysis.reference_table(references[component]).values())[:2]
         assert len(t_ref) == 9 and np.all(np.diff(t_ref) > 0) and t_ref[-1] < 0.4
     assert CHECK.tolerance["dx_peak_error"] == 0.15 and CHECK.tolerance["dx_rms_error"] == 0.2
+
+
+def _case_body(path, **changes):
+    from parmps import config, schema
+    from parmps.solids.mass_spring.build import build_bodies
+    raw = config.load_text(path.read_text())
+    raw["body"][0].update(changes)
+    (body,) = build_bodies(schema.validate(raw))
+    return body
+
+
+@pytest.mark.filterwarnings("ignore")
+def test_the_3d_gate_at_rest_bends_between_plane_stress_and_plane_strain():
+    # The 3D case's gate (3 nodes through its 5 mm, 40 across 0.1 m, free length 0.08 m)
+    # under the still column, statics (parmps/tools/gate_statics.py). The lattice is checked
+    # at both limits first: with every node's sideways (y) motion held it is plane strain
+    # (f = 1), as a strip one or two cells wide it is plane stress (f = 0), each within 0.2
+    # of f, 1.3 % of the deflection. Free side edges put its mid-width between, nearer plane
+    # strain (measured f = 0.66; validation/elastic_gate_3d/README.md).
+    from conftest import CASES
+    from parmps.solids.mass_spring.statics import static_displacement, stiffness_matrix
+    from parmps.tools import gate_statics
+    nu, height, mid = 0.25, 0.14, [57, 58, 59, 60, 61, 62]
+    body = _case_body(CASES / "elastic_gate_3d.toml")
+    result = gate_statics.gate_convention(body, height, 12.0e6, nu, mid)
+    held = np.zeros_like(body.position, bool)
+    held[body.pinned] = True
+    held[:, 1] = True
+    matrix = stiffness_matrix(body.position, body.springs, body.stiffness)
+    force = gate_statics.face_loads(body.position, 0.0025, height)
+    strain = static_displacement(matrix, force, held)[0][mid, 0].mean()
+    assert (1.0 - strain / result["plane_stress"]) / nu ** 2 == pytest.approx(1.0, abs=0.2)
+    for across in (2, 3):
+        strip = _case_body(CASES / "elastic_gate_3d.toml", ny=across)
+        tip = np.flatnonzero(np.isclose(strip.position[:, 2], strip.position[:, 2].min()))
+        narrow = gate_statics.gate_convention(strip, height, 12.0e6, nu, tip)
+        assert narrow["fraction"] == pytest.approx(0.0, abs=0.2)
+    assert 0.5 < result["fraction"] < 0.8, result["fraction"]
+    # The side edges bend less than the middle, and the profile is symmetric.
+    profile = result["across"]
+    assert len(profile) == 40 and profile[0] < profile[19]
+    np.testing.assert_allclose(profile, profile[::-1], rtol=1e-9)
+
+
+def test_the_2d_gate_at_rest_bends_as_its_plane_strain_beam():
+    # The 2D case's gate (plane strain, built with E/(1 - nu^2) of nu = 0.4) under the same
+    # still column: its tip within 0.5 % of Euler-Bernoulli with D = E t^3/12(1 - 0.4^2).
+    from conftest import CASES
+    from parmps.tools import gate_statics
+    body = _case_body(CASES / "elastic_gate.toml")
+    result = gate_statics.gate_convention(body, 0.14, 12.0e6, 0.4, [0, 1, 2, 3])
+    assert result["lattice"] == pytest.approx(result["plane_strain"], rel=5e-3)

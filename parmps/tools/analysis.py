@@ -526,7 +526,8 @@ def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate
     to the record's) and ``<component>_rms_error`` (the RMS difference at the record's times
     that the run reached, relative to the record's peak).
 
-    Returns a dict: time, dx, dy (the tip series), dx_max and t_dx_max (the largest
+    Returns a dict: time, dx, dy (the tip series: dx along the flow, dy the vertical, the
+    last axis), dx_max and t_dx_max (the largest
     horizontal opening and when), dy_max (the largest rise), crossings (their total),
     volume_error (largest |A - A0|/A0), end (the last step's time) and the errors above.
     """
@@ -536,9 +537,10 @@ def elastic_gate(path, case, probe="gate_tip", check="gate_crossing", body="gate
         end = float(result.diagnostics["time"][-1])
     error = float(np.abs(solid_series(path, body)["volume_error"]).max())
     peak = int(np.argmax(value[:, 0]))
-    measured = {"time": time, "dx": value[:, 0], "dy": value[:, 1],
+    # dx along the flow, dy the vertical: the last axis (z in 3D).
+    measured = {"time": time, "dx": value[:, 0], "dy": value[:, -1],
                 "dx_max": float(value[peak, 0]), "t_dx_max": float(time[peak]),
-                "dy_max": float(value[:, 1].max()),
+                "dy_max": float(value[:, -1].max()),
                 "crossings": int(total[-1]) if len(total) else 0,
                 "volume_error": error, "end": end}
     for component, reference in (references or {}).items():
