@@ -112,3 +112,22 @@ def test_the_2d_gate_at_rest_bends_as_its_plane_strain_beam():
     body = _case_body(CASES / "elastic_gate.toml")
     result = gate_statics.gate_convention(body, 0.14, 12.0e6, 0.4, [0, 1, 2, 3])
     assert result["lattice"] == pytest.approx(result["plane_strain"], rel=5e-3)
+
+
+def test_the_3d_gate_clears_the_walls_and_its_probe_is_the_tip_at_mid_width():
+    # cases/elastic_gate_3d.toml as built: its side faces and tip half a spacing clear of the
+    # side walls and the floor (as the water's first layer), the clamp rows 32-35 pinned (free
+    # length 32 a = 0.08 m), and the probe's 6 nodes the tip row's at mid-width.
+    from conftest import CASES
+    a = 0.0025
+    body = _case_body(CASES / "elastic_gate_3d.toml")
+    position = body.position
+    assert len(position) == 3 * 40 * 36
+    np.testing.assert_allclose(position.min(axis=0), [0.1 + a / 2, a / 2, a / 2], atol=1e-12)
+    np.testing.assert_allclose(position.max(axis=0)[:2], [0.1 + 2.5 * a, 0.1 - a / 2],
+                               atol=1e-12)
+    pinned_rows = np.unique(np.round(position[body.pinned, 2] / a - 0.5).astype(int))
+    assert list(pinned_rows) == [32, 33, 34, 35] and body.pinned.sum() == 4 * 120
+    probe = validation.load("elastic_gate_3d").case()["probe"][0]["nodes"]
+    np.testing.assert_allclose(position[probe, 2], a / 2, atol=1e-12)
+    np.testing.assert_allclose(position[probe, 1].mean(), 0.05, atol=1e-12)
