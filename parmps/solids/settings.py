@@ -1,5 +1,6 @@
 """Case sections of the solids: the shared solver settings and the bodies."""
 
+import logging
 import math
 
 from parmps.config import ZERO, Key, Section
@@ -126,6 +127,14 @@ def check_dimension_support(raw, dimension):
 
 def check(case):
     if case["body"]:
-        # Bodies are small: building them is the cheapest complete check.
+        # Bodies are small: building them is the cheapest complete check. Its warnings (a
+        # Poisson ratio the lattice cannot represent, a body one cell deep) come again when
+        # the run builds the bodies: only that build says them.
         from parmps.solids.mass_spring.build import build_bodies
-        build_bodies(case)
+        quiet = logging.getLogger("parmps.solids")
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)
+        try:
+            build_bodies(case)
+        finally:
+            quiet.setLevel(level)
