@@ -92,8 +92,8 @@ def gate_convention(body, water_height, youngs_modulus, poisson_ratio, probe_nod
     strain = stress * (1.0 - poisson_ratio ** 2)
     # The free row's deflection along the width (one value in 2D).
     tip = np.isclose(position[:, -1], position[:, -1].min())
-    lines, line = np.unique(np.round(position[tip, 1:-1] / lattice_spacing(body)).astype(int),
-                            axis=0, return_inverse=True)
+    _, line = np.unique(np.round(position[tip, 1:-1] / lattice_spacing(body)).astype(int),
+                        axis=0, return_inverse=True)
     across = np.bincount(line.ravel(), displacement[tip, 0]) / np.bincount(line.ravel())
     return {"lattice": lattice, "plane_stress": stress, "plane_strain": strain,
             "fraction": (1.0 - lattice / stress) / poisson_ratio ** 2, "across": across}
