@@ -34,6 +34,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from parmps.core.geometry import cell_runs, edge_lengths
 from parmps.core.particles import FLUID, INFLOW
 from parmps.io.series import Series
 from parmps.run.observers import Observer
@@ -132,8 +133,7 @@ def mid_surface_sides(points, vertices, facets, band):
         return sides
     # A point of a triangle lies within the triangle's longest edge of one of its corners:
     # a point farther than band + that from every vertex is beside no triangle.
-    corners = vertices[facets]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()
+    longest = edge_lengths(vertices[facets]).max()
     distance, _ = cKDTree(vertices).query(points, distance_upper_bound=band + longest)
     candidates = np.flatnonzero(np.isfinite(distance))
     if len(candidates) == 0:
@@ -141,15 +141,9 @@ def mid_surface_sides(points, vertices, facets, band):
     border = border_edges(facets)
     triangle_box = _boxes(vertices, facets)
     edge_box = _boxes(vertices, border)
-    cube = 2.0 * band
     near_points = points[candidates]
-    key = np.floor((near_points - near_points.min(axis=0)) / cube).astype(np.int64)
-    _, group = np.unique(key, axis=0, return_inverse=True)
-    group = group.ravel()
-    order = candidates[np.argsort(group, kind="stable")]
-    group = np.sort(group, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(group) != 0])
-    for rows in np.split(order, starts[1:]):
+    order, starts = cell_runs(near_points, 2.0 * band, near_points.min(axis=0))
+    for rows in np.split(candidates[order], starts[1:-1]):
         low = points[rows].min(axis=0) - band
         high = points[rows].max(axis=0) + band
         near = _overlapping(triangle_box, low, high)

@@ -63,6 +63,22 @@ def winding_number(points, vertices, triangles, chunk=200_000):
     return out
 
 
+def cell_runs(points, side, origin=0.0):
+    """The points grouped by the cubic cell of ``side`` (cells counted from ``origin``) they
+    fall in: (order, starts), ``order`` the indices of the points cell by cell (stable within
+    a cell) and ``starts`` where each cell's run begins in it, with len(points) at the end."""
+    key = np.floor((np.asarray(points) - origin) / side).astype(np.int64)
+    _, cell = np.unique(key, axis=0, return_inverse=True)
+    cell = cell.ravel()
+    order = np.argsort(cell, kind="stable")
+    return order, np.flatnonzero(np.r_[True, np.diff(cell[order]) != 0, True])
+
+
+def edge_lengths(corners):
+    """The lengths (m, k) of the edges of polygons given by their corners (m, k, d)."""
+    return np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+
+
 def fast_winding_number(points, vertices, triangles, patch=None):
     """:func:`winding_number` in a time that grows with the surface's area near each point,
     not with all its triangles (the fast winding number of Barill et al. 2018, to first
@@ -80,14 +96,10 @@ def fast_winding_number(points, vertices, triangles, patch=None):
     corners = vertices[triangles]
     centroid = corners.mean(axis=1)
     if patch is None:
-        edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2)
+        edges = edge_lengths(corners)
         patch = PATCH_EDGES * float(edges.mean()) if len(edges) else 1.0
-    key = np.floor(centroid / patch).astype(np.int64)
-    _, cell = np.unique(key, axis=0, return_inverse=True)
-    cell = cell.ravel()
-    order = np.argsort(cell, kind="stable")
-    corners, cell = corners[order], cell[order]
-    starts = np.flatnonzero(np.r_[True, np.diff(cell) != 0, True])
+    order, starts = cell_runs(centroid, patch)
+    corners = corners[order]
     area = 0.5 * np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     patch_area = np.add.reduceat(area, starts[:-1], axis=0)
     weight = np.linalg.norm(area, axis=1)
