@@ -18,7 +18,8 @@ from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, SOLID, WALL, Particles
 from parmps.errors import CaseError
 from parmps.fluid.constants import MPSConstants
-from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SOURCES, SURFACES, registered,
+from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
+                                  registered,
                                   scheme_class)
 
 PACKAGE = Path(parmps.__file__).parent
@@ -105,13 +106,15 @@ def test_every_registered_scheme_loads_and_declares_its_settings():
     assert set(SOURCES) >= {"density_rate", "compensated_rate", "density_acceleration"}
     assert set(LAPLACIANS) >= {"standard", "higher_order"}
     assert set(SURFACES) >= {"dirichlet", "extrapolated"}
+    assert set(SHIFTINGS) >= {"none", "fickian"}
     # one [mps.<name>] table each
-    names = [*SOURCES, *LAPLACIANS, *GRADIENTS, *SURFACES]
+    names = [*SOURCES, *LAPLACIANS, *GRADIENTS, *SURFACES, *SHIFTINGS]
     assert len(set(names)) == len(names)
     for name, scheme in registered():
         assert isinstance(scheme.KEYS, dict)
         assert (hasattr(scheme, "rhs") or hasattr(scheme, "rows")
-                or hasattr(scheme, "gradient") or hasattr(scheme, "unknowns")), name
+                or hasattr(scheme, "gradient") or hasattr(scheme, "unknowns")
+                or hasattr(scheme, "shift")), name
     case = _validated()
     for name in names:
         assert isinstance(case["mps"][name], dict)

@@ -135,6 +135,38 @@ def smooth_density(indptr, cols, position, support, n_rows):
     return _smooth_density(indptr, cols, position, support, n_rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _concentration_gradient(indptr, cols, position, support, rows, n_rows, d):
+    gradient = np.zeros((n_rows, d))
+    inverse_square = 1.0 / (support * support)
+    for i in range(n_rows):
+        if not rows[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            r2 = pair_distance2(position, i, j, d)
+            if r2 >= support * support:
+                continue
+            # grad_i W(|x_i - x_j| / s) = 20 (1 - q)^3 r_ij / s^2 for Wendland's C2
+            # function (r_ij = x_j - x_i): no 1/r, so coincident pairs are harmless.
+            a = 1.0 - np.sqrt(r2) / support
+            factor = 20.0 * a * a * a * inverse_square
+            for k in range(d):
+                gradient[i, k] += factor * pair_component(position, i, j, k)
+    return gradient
+
+
+@numba.njit(cache=True)
+def concentration_gradient(indptr, cols, position, support, rows, n_rows):
+    """``grad_i sum_j W(r_ij)`` of the rows in ``rows`` (0 for the others), W Wendland's C2
+    function of radius ``support``: the gradient of :func:`smooth_density`, which points
+    to where the neighbours crowd."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _concentration_gradient(indptr, cols, position, support, rows, n_rows, 2)
+    return _concentration_gradient(indptr, cols, position, support, rows, n_rows, 3)
+
+
 # --- pairs within a smaller radius ------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

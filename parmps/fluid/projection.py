@@ -18,7 +18,8 @@ from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
-from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, scheme_class
+from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
+                                  scheme_class)
 
 log = logging.getLogger(__name__)
 
@@ -97,6 +98,8 @@ class FluidSolver:
                                                                  constants)
         self.free_surface = scheme_class(SURFACES, mps["free_surface"])(
             mps[mps["free_surface"]], constants)
+        self.shifting = scheme_class(SHIFTINGS, mps["shifting"])(mps[mps["shifting"]],
+                                                                 constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
@@ -239,6 +242,8 @@ class FluidSolver:
         correction = pressure_gradient[moving] / c.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction
+        if self.shifting.active:
+            self._shift(particles, indptr, cols, position_star, velocity_star, surface, dt)
 
         particles.position[:n] = position_star[:n]
         particles.velocity[:n] = velocity_star[:n]
@@ -247,6 +252,21 @@ class FluidSolver:
         timers.stop()
         return {"ksp_iterations": iterations, "ksp_residual": residual,
                 "n_surface": int(np.count_nonzero(surface & moving))}
+
+    def _shift(self, particles, indptr, cols, position, velocity, surface, dt):
+        """Move the owned fluid particles by the shifting scheme's shift (in place), from
+        the corrected positions; ``surface``: the owned free-surface particles of the step."""
+        timers = self.timers
+        n = particles.n_owned
+        fluid = particles.kind == FLUID
+        on_surface = np.zeros(len(particles), np.int8)
+        on_surface[:n] = surface & fluid[:n]
+        timers.start("halo")
+        self.decomposition.refresh([position, on_surface])
+        timers.start("operators")
+        shift = self.shifting.shift(indptr, cols, position, velocity, on_surface.view(bool),
+                                    fluid[:n], dt, n)
+        position[:n] += shift
 
 
 def max_speed(particles, comm):

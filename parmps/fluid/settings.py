@@ -2,7 +2,8 @@
 
 from parmps.config import Key, Section
 from parmps.errors import CaseError
-from parmps.fluid.schemes import GRADIENTS, LAPLACIANS, SOURCES, SURFACES, scheme_class
+from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
+                                  scheme_class)
 
 
 def _mps_section():
@@ -24,6 +25,9 @@ def _mps_section():
         "free_surface": Key("str", "extrapolated", choices=tuple(SURFACES),
                             doc="where P = 0: \"extrapolated\" half a spacing beyond the "
                                 "free-surface particles, \"dirichlet\" on them"),
+        "shifting": Key("str", "none", choices=tuple(SHIFTINGS),
+                        doc="particle shifting after the correction: \"none\" or \"fickian\" "
+                            "(settings in [mps.<name>])"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True,
                                        doc="negative pressures are set to 0 after the solve"),
@@ -35,7 +39,8 @@ def _mps_section():
                            doc="coefficient of restitution of the collision model"),
     }
     for choice, registry in (("source", SOURCES), ("laplacian", LAPLACIANS),
-                             ("gradient", GRADIENTS), ("free_surface", SURFACES)):
+                             ("gradient", GRADIENTS), ("free_surface", SURFACES),
+                             ("shifting", SHIFTINGS)):
         for name in registry:
             scheme = scheme_class(registry, name)
             keys[name] = Key("table", keys=scheme.KEYS,

@@ -7,7 +7,8 @@ rows; a gradient scheme supplies ``gradient(...)``, the pressure gradient that
 moves the fluid and pushes the bodies (the coupling takes the same one). Each
 class declares ``KEYS``, the settings of its own table ``[mps.<name>]`` in the
 case; the case chooses one of each with ``mps.source``, ``mps.laplacian`` and
-``mps.gradient``. The exact form of each scheme, with its source, is in
+``mps.gradient``; a shifting scheme (``mps.shifting``) supplies ``shift(...)``, a
+small move of the fluid particles after the correction that keeps them ordered. The exact form of each scheme, with its source, is in
 docs/design.md §1.4 and docs/schemes.md. Khayyer & Gotoh's names: HS is
 ``density_rate``, HS + ECS ``compensated_rate``, HL the ``higher_order``
 Laplacian, GC the ``corrected`` gradient; Kondo & Koshizuka's second time
@@ -39,15 +40,22 @@ SURFACES = {
     "extrapolated": "parmps.fluid.schemes.surface:ExtrapolatedSurface",
 }
 
+SHIFTINGS = {
+    "none": "parmps.fluid.schemes.shifting:NoShifting",
+    "fickian": "parmps.fluid.schemes.shifting:FickianShifting",
+}
+
 
 def scheme_class(registry, name):
-    """The class registered under ``name`` in ``registry`` (SOURCES, LAPLACIANS, GRADIENTS or
-    SURFACES)."""
+    """The class registered under ``name`` in ``registry`` (SOURCES, LAPLACIANS, GRADIENTS,
+    SURFACES or SHIFTINGS)."""
     module, attribute = registry[name].split(":")
     return getattr(importlib.import_module(module), attribute)
 
 
 def registered():
-    """Every registered scheme as (name, class): sources, Laplacians, gradients, surfaces."""
+    """Every registered scheme as (name, class): sources, Laplacians, gradients, surfaces,
+    shiftings."""
     return [(name, scheme_class(registry, name))
-            for registry in (SOURCES, LAPLACIANS, GRADIENTS, SURFACES) for name in registry]
+            for registry in (SOURCES, LAPLACIANS, GRADIENTS, SURFACES, SHIFTINGS)
+            for name in registry]
