@@ -564,8 +564,9 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
     position, _, position_star, step = _moving_step(constants, 7, 4)
     cls = scheme_class(SOURCES, name)
     gamma = 0.2
-    smooth = cls({"relaxation": gamma, "kernel": "smooth"}, constants).rhs(step)
-    mps = cls({"relaxation": gamma, "kernel": "mps"}, constants).rhs(step)
+    defaults = {key: spec.default for key, spec in cls.KEYS.items()}
+    smooth = cls({**defaults, "relaxation": gamma, "kernel": "smooth"}, constants).rhs(step)
+    mps = cls({**defaults, "relaxation": gamma, "kernel": "mps"}, constants).rhs(step)
     at = position_star if name == "density" else position
     measure = kernels.smooth_density(step.indptr, step.cols, at, constants.re_number_density,
                                      len(position))[step.unknown_index]
@@ -580,3 +581,35 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
         term = term + divergence_part
     np.testing.assert_allclose(smooth, term, rtol=1e-9, atol=1e-6 * np.abs(term).max())
     assert np.abs(smooth - mps).max() > 1e-3 * np.abs(mps).max()
+
+
+@pytest.mark.parametrize("beside_bodies", ["density", "mixed"])
+def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies):
+    """Rows with a body's node in their support take the density source's right-hand side
+    (gamma_b rho/dt^2 (W-sum* - lattice)/lattice at the predicted positions) under
+    beside_bodies = "density"; every other row, and every row under "mixed", the mixed
+    source's, bit for bit."""
+    from dataclasses import replace
+    from parmps.fluid.schemes import SOURCES, scheme_class
+    constants = _constants()
+    position, _, position_star, step = _moving_step(constants, 7, 4)
+    cls = scheme_class(SOURCES, "mixed")
+    defaults = {key: spec.default for key, spec in cls.KEYS.items()}
+    plain = cls({**defaults, "beside_bodies": "mixed"}, constants).rhs(step)
+    density = scheme_class(SOURCES, "density")(
+        {"relaxation": defaults["body_relaxation"], "kernel": defaults["kernel"]},
+        constants).rhs(step)
+    node = np.zeros(len(position), bool)
+    node[np.argmin(np.abs(position - 12 * SPACING).sum(axis=1))] = True
+    beside = kernels.rows_beside(step.near_indptr, step.near_cols, node, len(position))
+    # The node itself and the rows within the number density's radius of it.
+    assert 1 + 8 <= np.count_nonzero(beside) <= 1 + 24
+    source = cls({**defaults, "beside_bodies": beside_bodies}, constants)
+    rhs = source.rhs(replace(step, beside_body=beside))
+    expected = plain.copy()
+    if beside_bodies == "density":
+        expected[beside[step.unknown_index]] = density[beside[step.unknown_index]]
+        assert not np.allclose(plain[beside[step.unknown_index]],
+                               density[beside[step.unknown_index]])
+    np.testing.assert_array_equal(rhs, expected)
+    np.testing.assert_array_equal(source.rhs(step), plain)  # no node on the rank

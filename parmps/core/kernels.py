@@ -167,6 +167,22 @@ def concentration_gradient(indptr, cols, position, support, rows, n_rows):
     return _concentration_gradient(indptr, cols, position, support, rows, n_rows, 3)
 
 
+@numba.njit(cache=True)
+def rows_beside(indptr, cols, is_target, n_rows):
+    """The rows [0, n_rows) of the pair list with a neighbour in ``is_target`` (every local
+    particle), or one themselves."""
+    found = np.zeros(n_rows, np.bool_)
+    for i in range(n_rows):
+        if is_target[i]:
+            found[i] = True
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            if is_target[cols[p]]:
+                found[i] = True
+                break
+    return found
+
+
 # --- pairs within a smaller radius ------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

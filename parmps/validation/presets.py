@@ -1,8 +1,11 @@
 """Pressure-scheme presets: named sets of case overrides, the one table the studies use.
 
 Each preset is a list of ``SECTION.KEY=VALUE`` overrides (as ``--set`` takes them),
-complete against the defaults and against the Lobovsky case's own choice (mixed (γ 0.1)
-+ GC). "default" is the defaults themselves. "MPS" is the original scheme; Khayyer &
+complete against the defaults: each names its source, and a mixed source its measure and
+its rows beside bodies (PURE_MIXED: the mixed source there too, as before the default
+took the density source beside bodies). "default" is the defaults themselves (the mixed
+source, γ 0.1, smooth measure, the density source beside bodies, GC, the extrapolated
+surface). "MPS" is the original scheme; Khayyer &
 Gotoh's HS is the density_rate source, ECS the compensated_rate one, HL the higher_order
 Laplacian, GC the corrected gradient; KK is Kondo & Koshizuka's second difference. The
 free-surface condition: P = 0 on the free-surface particles, left uncorrected (every
@@ -12,6 +15,8 @@ corrected gradient applied to them (the default since). docs/schemes.md has the 
 
 DIRICHLET = ['mps.free_surface="dirichlet"']
 EXTRAPOLATED = ['mps.free_surface="extrapolated"']
+PURE_MIXED = ['mps.mixed.beside_bodies="mixed"']
+WITH_N = ['mps.mixed.kernel="mps"']
 
 SCHEMES = {
     "default": [],
@@ -24,15 +29,15 @@ SCHEMES = {
                  *DIRICHLET],
     "MPS (smooth n) + GC": ['mps.source="density"', 'mps.density.kernel="smooth"',
                             'mps.gradient="corrected"', *DIRICHLET],
-    "mixed": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", 'mps.gradient="minimum"',
-              *DIRICHLET],
-    "mixed + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.01",
+    "mixed": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", *WITH_N, *PURE_MIXED,
+              'mps.gradient="minimum"', *DIRICHLET],
+    "mixed + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.01", *WITH_N, *PURE_MIXED,
                    'mps.gradient="corrected"', *DIRICHLET],
-    "mixed (γ 0.1) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                           'mps.gradient="corrected"', *DIRICHLET],
+    "mixed (γ 0.1) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1", *WITH_N,
+                           *PURE_MIXED, 'mps.gradient="corrected"', *DIRICHLET],
     "mixed (γ 0.1, smooth n) + GC": ['mps.source="mixed"', "mps.mixed.relaxation=0.1",
-                                     'mps.mixed.kernel="smooth"', 'mps.gradient="corrected"',
-                                     *DIRICHLET],
+                                     'mps.mixed.kernel="smooth"', *PURE_MIXED,
+                                     'mps.gradient="corrected"', *DIRICHLET],
     "HS": ['mps.source="density_rate"', 'mps.gradient="minimum"', *DIRICHLET],
     "HS + HL": ['mps.source="density_rate"', 'mps.laplacian="higher_order"',
                 'mps.gradient="minimum"', *DIRICHLET],
@@ -50,8 +55,12 @@ SCHEMES = {
                                                   'mps.density.kernel="smooth"',
                                                   'mps.gradient="corrected"', *EXTRAPOLATED],
     "mixed (γ 0.1) + GC, extrapolated surface": ['mps.source="mixed"',
-                                                 "mps.mixed.relaxation=0.1",
-                                                 'mps.gradient="corrected"', *EXTRAPOLATED],
+                                                 "mps.mixed.relaxation=0.1", *WITH_N,
+                                                 *PURE_MIXED, 'mps.gradient="corrected"',
+                                                 *EXTRAPOLATED],
+    "MPS (smooth n) + GC, extrapolated surface, shifting": [
+        'mps.source="density"', 'mps.density.kernel="smooth"', 'mps.gradient="corrected"',
+        *EXTRAPOLATED, 'mps.shifting="fickian"'],
 }
 
 # The presets scripts/study.py sweeps (the dam break's front against resolution) and those
