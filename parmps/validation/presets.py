@@ -3,9 +3,8 @@
 Each preset is a list of ``SECTION.KEY=VALUE`` overrides (as ``--set`` takes them),
 complete against the defaults: each names its source, and a mixed source its measure and
 its rows beside bodies (PURE_MIXED: the mixed source there too, as before the default
-took the density source beside bodies). "default" is the defaults themselves (the mixed
-source, γ 0.1, smooth measure, the density source beside bodies, GC, the extrapolated
-surface). "MPS" is the original scheme; Khayyer &
+took the density source beside bodies). "default" is the defaults themselves (the density
+source, smooth measure, GC, the extrapolated surface). "MPS" is the original scheme; Khayyer &
 Gotoh's HS is the density_rate source, ECS the compensated_rate one, HL the higher_order
 Laplacian, GC the corrected gradient; KK is Kondo & Koshizuka's second difference. The
 free-surface condition: P = 0 on the free-surface particles, left uncorrected (every
@@ -58,6 +57,10 @@ SCHEMES = {
                                                  "mps.mixed.relaxation=0.1", *WITH_N,
                                                  *PURE_MIXED, 'mps.gradient="corrected"',
                                                  *EXTRAPOLATED],
+    # The mixed source as it stands (γ 0.05, smooth measure, the density source beside
+    # bodies), the Lobovsky case's choice.
+    "mixed, density beside bodies": ['mps.source="mixed"', 'mps.gradient="corrected"',
+                                     *EXTRAPOLATED],
     "MPS (smooth n) + GC, extrapolated surface, shifting": [
         'mps.source="density"', 'mps.density.kernel="smooth"', 'mps.gradient="corrected"',
         *EXTRAPOLATED, 'mps.shifting="fickian"'],

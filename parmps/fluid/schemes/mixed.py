@@ -1,4 +1,4 @@
-"""The mixed source of Tanaka & Masunaga (2010; docs/design.md §1.4), the default.
+"""The mixed source of Tanaka & Masunaga (2010; docs/design.md §1.4).
 
 ``rhs_i = -rho/dt <div u*>_i + gamma rho/dt^2 (n_i - n0)/n0``: the divergence of
 the predicted velocity at the predicted positions, plus a weak density term at the
@@ -16,8 +16,8 @@ moves after the solve, by its springs and its body's volume constraint under the
 fluid force held over the step. For a body lighter than the fluid in a fast flow
 that mismatch grows from step to step: the box-in-flow map lost 5 of its 20 runs
 (solid/fluid density 0.01 and 0.1 from 5 U0, 0.3 at 10 U0) with the divergence
-there (gamma 0.1), and ran all 20 with the density source beside the box; at the
-default gamma 0.05, 19 (0.1 at 10 U0 stops). The density source answers the nodes'
+there (gamma 0.1), and ran all 20 with the density source beside the box; at
+gamma 0.05, 19 (0.1 at 10 U0 stops). The density source answers the nodes'
 positions only, which the coupling was validated with; its gamma_b stays the density
 source's 0.2 (at 0.1 the membrane tube stops and the plate reads 6 % high).
 """
