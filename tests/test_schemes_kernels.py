@@ -604,12 +604,16 @@ def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies):
     beside = kernels.rows_beside(step.near_indptr, step.near_cols, node, len(position))
     # The node itself and the rows within the number density's radius of it.
     assert 1 + 8 <= np.count_nonzero(beside) <= 1 + 24
+    from parmps.core.particles import FLUID, SOLID
+    kind = np.where(node, SOLID, FLUID)
     source = cls({**defaults, "beside_bodies": beside_bodies}, constants)
-    rhs = source.rhs(replace(step, beside_body=beside))
+    rhs = source.rhs(replace(step, kind=kind))
     expected = plain.copy()
     if beside_bodies == "density":
         expected[beside[step.unknown_index]] = density[beside[step.unknown_index]]
         assert not np.allclose(plain[beside[step.unknown_index]],
                                density[beside[step.unknown_index]])
     np.testing.assert_array_equal(rhs, expected)
-    np.testing.assert_array_equal(source.rhs(step), plain)  # no node on the rank
+    # No node on the rank:
+    np.testing.assert_array_equal(source.rhs(replace(step, kind=np.full_like(kind, FLUID))),
+                                  plain)

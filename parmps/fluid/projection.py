@@ -15,7 +15,7 @@ import numpy as np
 
 from parmps.core import kernels
 from parmps.core.neighbours import pair_list
-from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID, WALL
+from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
@@ -54,8 +54,7 @@ class PressureStep:
     ``indptr``/``cols`` is the step's pair list (the search radius, which covers
     any position in the step); ``near_indptr``/``near_cols`` its pairs within the
     number density's radius at ``position_star``, for the sums there.
-    ``beside_body``: the owned rows with a body's node within that radius (or that are
-    one), None where the rank holds no node.
+    ``kind``: every local particle's kind (owned, then ghosts).
     """
 
     dt: float
@@ -70,7 +69,7 @@ class PressureStep:
     unknown_index: np.ndarray
     near_indptr: np.ndarray
     near_cols: np.ndarray
-    beside_body: np.ndarray = None
+    kind: np.ndarray = None
 
     def number_density_at(self, position, radius):
         """The number density of the owned rows with the particles at ``position``
@@ -217,14 +216,11 @@ class FluidSolver:
         rhs = np.zeros(len(pressure_index))
         in_rows = (unknown | surface_unknown)[pressure_index]
         with_source = unknown[pressure_index]
-        node = kind == SOLID
-        beside_body = (kernels.rows_beside(near_indptr, near_cols, node, n)
-                       if np.any(node) else None)
         rhs[with_source] = self.source.rhs(PressureStep(
             dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
             velocity=velocity, position_star=position_star, velocity_star=velocity_star,
             number_density=number_density, unknown_index=pressure_index[with_source],
-            near_indptr=near_indptr, near_cols=near_cols, beside_body=beside_body))
+            near_indptr=near_indptr, near_cols=near_cols, kind=kind))
 
         timers.start("solve")
         guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)

@@ -26,6 +26,7 @@ import numpy as np
 
 from parmps.config import Key
 from parmps.core import kernels
+from parmps.core.particles import SOLID
 from parmps.fluid.schemes.density import MeasuredSource, kernel_key
 
 BESIDE_BODIES = ("density", "mixed")
@@ -64,10 +65,19 @@ class MixedSource(MeasuredSource):
         rhs = (-(c.density / step.dt) * divergence[index]
                + self.relaxation * (c.density / step.dt ** 2)
                * self.density_error(step, predicted=False))
-        if self.beside_bodies == "density" and step.beside_body is not None:
-            beside = step.beside_body[index]
+        if self.beside_bodies == "density" and step.kind is not None:
+            beside = self.beside_body(step)[index]
             if np.any(beside):
                 density = (self.body_relaxation * (c.density / step.dt ** 2)
                            * self.density_error(step, predicted=True))
                 rhs[beside] = density[beside]
         return rhs
+
+    @staticmethod
+    def beside_body(step):
+        """The owned rows with a body's node within the number density's radius at the
+        predicted positions, or that are one (none on a rank that holds no node)."""
+        node = step.kind == SOLID
+        if not np.any(node):
+            return np.zeros(step.n_owned, bool)
+        return kernels.rows_beside(step.near_indptr, step.near_cols, node, step.n_owned)
