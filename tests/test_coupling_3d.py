@@ -12,9 +12,9 @@ from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
 from parmps import open_result, schema
-from parmps.checks.crossing import (count_crossings, lattice_mid_line, lattice_mid_surface,
-                                    mid_line_sides, mid_surface_sides)
-from parmps.core.geometry import inside_boundary, point_in_polygon
+from parmps.checks.crossing import (closed_surface_sides, count_crossings, lattice_mid_line,
+                                    lattice_mid_surface, mid_line_sides, mid_surface_sides)
+from parmps.core.geometry import inside_boundary, point_in_polygon, surface_distance
 from parmps.core.particles import FLUID, SOLID, WALL, Particles
 from parmps.coupling.weak import fluid_inside
 from parmps.errors import CaseError
@@ -294,6 +294,30 @@ def test_a_particle_pushed_through_the_plate_counts_and_one_round_its_edge_does_
     assert _crossings(round_x, vertices, facets) == 0
 
 
+def test_a_particle_through_a_closed_shell_counts_and_one_beside_it_does_not():
+    """The check's sides of a closed shell: inside +1, outside -1; out through the sphere
+    and back in counts two, a path that stays outside (round it) or inside counts none."""
+    vertices, facets = icosphere(0.03, 4)
+
+    def crossings(path):
+        total, previous = 0, (np.zeros(0, np.int64), np.zeros(0, np.int8))
+        for point in path:
+            now = (np.array([7]), closed_surface_sides([point], vertices, facets))
+            total += count_crossings(*previous, *now)
+            previous = now
+        return total
+
+    out_and_back = _leg([0.0, 0.0, 0.0], [0.045, 0.0, 0.0]) + _leg([0.045, 0.0, 0.0],
+                                                                      [0.0, 0.0, 0.0])
+    assert crossings(out_and_back) == 2
+    # Through a vertex of the mesh (the icosphere has one on each axis' pole).
+    assert crossings(_leg([0.0, 0.0, 0.01], [0.0, 0.0, 0.05])) == 1
+    around = (_leg([-0.05, 0.0, 0.0], [-0.05, 0.05, 0.0]) + _leg([-0.05, 0.05, 0.0],
+                                                                  [0.05, 0.05, 0.0]))
+    assert crossings(around) == 0
+    assert crossings(_leg([-0.02, 0.0, 0.0], [0.02, 0.0, 0.0])) == 0
+
+
 # -- coupled 3D runs ----------------------------------------------------------------------------
 
 # A still tank 16 x 6 x 8 l0 of water (l0 = 2 cm) around a 3 x 3 x 3-node box in its middle,
@@ -456,17 +480,26 @@ def test_the_same_answer_by_id_on_one_two_and_three_ranks(tmp_path):
 
 # -- what is still refused -------------------------------------------------------------------
 
-def test_a_shell_in_a_fluid_is_refused_in_one_line(tank_case, tmp_path):
-    text = tank_case.read_text().split("[[body]]")[0] + (
-        '[[body]]\nname = "cell"\ntype = "shell"\nshape = "sphere"\nradius = 0.04\n')
-    path = tmp_path / "shell.toml"
-    path.write_text(text)
-    result = run_parmps([path, "--check"], timeout=60)
-    assert result.returncode == 2
-    assert error_lines(result.stderr) == [
-        f"parmps: error: {path}: body[0] type = \"shell\" with [fluid_block]: closed shells "
-        f"are not coupled to a fluid yet; a shell runs without fluid, and lattice bodies run "
-        f"in a fluid in 2D and 3D"]
+CAPSULE_3D = CASES / "capsule_3d.toml"
+
+
+def test_a_shell_takes_the_place_of_the_water_at_its_surface_and_holds_the_rest():
+    """The capsule case's scene: the fluid block fills the duct and the capsule; the points
+    within half a spacing of the shell (its clearance, docs/shells.md) are left out, within
+    three of as many as it has nodes, and the rest stay on both sides of it."""
+    from parmps.core import scene
+    from parmps.solids.mass_spring.shell import fluid_clearance
+    case = schema.validate(tomllib.loads(CAPSULE_3D.read_text()))
+    model = MassSpringModel.from_case(case)
+    particles, _, _ = scene.build(case, model)
+    body = model.bodies[0]
+    fluid = particles.position[particles.kind == FLUID]
+    assert fluid_clearance(body.position, body.facets, 0.01) == 0.005
+    assert len(fluid) == 26 * 13 * 13 - 179 and body.n_nodes == 182
+    distance = surface_distance(fluid, body.position, body.facets, 0.01)
+    assert distance.min() >= 0.005
+    inside = inside_boundary(fluid, body.position, body.facets)
+    assert inside.sum() == 144
 
 
 def test_a_3d_body_off_the_particle_spacing_is_refused(tank_case):

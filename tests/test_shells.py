@@ -10,7 +10,7 @@ import pytest
 import parmps
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, schema, validation
-from parmps.core.geometry import winding_number
+from parmps.core.geometry import surface_distance, winding_number
 from parmps.errors import CaseError
 from parmps.solids.mass_spring import shell
 from parmps.solids.mass_spring.model import MassSpringModel
@@ -533,3 +533,56 @@ def test_the_squeezed_shell_keeps_its_volume_and_the_free_one_does_not(tmp_path)
     assert worst["constrained"] <= check.tolerance["volume_error"]
     low, high = check.tolerance["unconstrained_volume_error"]
     assert low <= worst["free"] <= high
+
+
+# -- the fluid beside a shell ---------------------------------------------------------------
+
+
+def _brute_distance(points, vertices, triangles):
+    """Distance to every triangle, by projecting on its plane or else its three edges."""
+    from parmps.core.geometry import _closest_on_triangle
+    corners = vertices[triangles]
+    return np.array([math.sqrt(min(_closest_on_triangle(p, *c) for c in corners))
+                     for p in points])
+
+
+def test_the_distance_to_a_surface_is_the_least_over_its_triangles():
+    vertices, triangles = shell.capsule(0.03, 0.04, 0.01)
+    rng = np.random.default_rng(3)
+    points = rng.uniform(vertices.min(axis=0) - 0.02, vertices.max(axis=0) + 0.02, (400, 3))
+    exact = _brute_distance(points, vertices, triangles)
+    near = surface_distance(points, vertices, triangles, 0.008)
+    within = exact <= 0.008
+    assert 50 < within.sum() < 350
+    np.testing.assert_allclose(near[within], exact[within], rtol=0, atol=1e-15)
+    assert np.all(np.isinf(near[~within]))
+    # On a sphere: |r - R| to the inscribed mesh's accuracy (its sag, below 1 % of R here).
+    vertices, triangles = shell.icosphere(1.0, 16)
+    radius = np.linalg.norm(points - points.mean(axis=0), axis=1)
+    direction = (points - points.mean(axis=0)) / radius[:, None]
+    shells = direction * rng.uniform(0.8, 1.2, len(points))[:, None]
+    distance = surface_distance(shells, vertices, triangles, 0.25)
+    np.testing.assert_allclose(distance, np.abs(np.linalg.norm(shells, axis=1) - 1.0),
+                               rtol=0, atol=2.2e-3)
+
+
+@pytest.mark.parametrize("edge", [0.5, 1.0, 2.0])
+def test_the_fluid_left_out_beside_a_shell_is_as_many_points_as_it_has_nodes(edge):
+    """A sphere of radius 5 l0 on the fluid's lattice: the points within the clearance of
+    its surface number its nodes, within the lattice's sampling of a shell (a tenth), where
+    the mesh is at least as fine as the fluid; a coarser mesh clears half a spacing, which
+    holds more points than the mesh has nodes."""
+    spacing = 1.0
+    vertices, triangles = shell.icosphere(5.0, edge_length=edge * spacing)
+    clearance = shell.fluid_clearance(vertices, triangles, spacing)
+    per_node = shell.triangle_areas(vertices, triangles).sum() / len(vertices)
+    assert clearance == pytest.approx(max(0.5, 0.5 / per_node))
+    axis = np.arange(-7, 8) + 0.5
+    lattice = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    taken = shell.displaced_by_shell(lattice, vertices, triangles, spacing)
+    distance = surface_distance(lattice, vertices, triangles, 3.0)
+    np.testing.assert_array_equal(taken, distance < clearance)
+    if clearance > 0.5:
+        assert taken.sum() == pytest.approx(len(vertices), rel=0.1)
+    else:
+        assert taken.sum() > len(vertices)

@@ -34,7 +34,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from parmps.core.geometry import cell_runs, edge_lengths
+from parmps.core.geometry import cell_runs, edge_lengths, inside_boundary
 from parmps.core.particles import FLUID, INFLOW
 from parmps.io.series import Series
 from parmps.run.observers import Observer
@@ -226,6 +226,13 @@ def _sides_kernel(points, a, b, c, unit, edge_normal, start, end, band):
     return sides
 
 
+def closed_surface_sides(points, vertices, facets):
+    """Side of a closed outward surface of each of ``points``: +1 inside, -1 outside. The
+    check gives every particle within the band of the surface's box a side; one that moves
+    less than the band in a step (time.cfl <= 1) and changes sides went through it."""
+    return np.where(inside_boundary(points, vertices, facets), 1, -1).astype(np.int8)
+
+
 def count_crossings(previous_ids, previous_sides, ids, sides):
     """How many particles are beside the body on opposite sides now and before (ids sorted
     or not; each id at most once in each set)."""
@@ -235,7 +242,8 @@ def count_crossings(previous_ids, previous_sides, ids, sides):
 
 
 class BodyCrossing(Observer):
-    """``[[check]] kind = "body_crossing"``: fluid particles through a lattice body."""
+    """``[[check]] kind = "body_crossing"``: fluid particles through a lattice body's
+    mid-surface, or through a closed shell's surface (from inside to outside or back)."""
 
     def __init__(self, spec, case, result, model, interval, end_time):
         self.name = f"check_{spec['name']}"
@@ -244,12 +252,17 @@ class BodyCrossing(Observer):
         self.comm = result.comm
         self.result = result
         self.model = model
-        body_spec = next(b for k, b in enumerate(case["body"])
-                         if (b["name"] or f"body{k}") == self.body_name)
-        self.shape = tuple(body_spec[key] for key in ("nx", "ny", "nz")[:case["dimension"]])
+        self.index, body_spec = next((k, b) for k, b in enumerate(case["body"])
+                                     if (b["name"] or f"body{k}") == self.body_name)
         spacing = case["particles"]["spacing"]
-        thickness = (min(self.shape) - 1) * body_spec["spacing"]
-        self.band = 0.5 * thickness + BAND_SPACINGS * spacing
+        # A closed shell holds fluid: its side of a particle is inside or outside.
+        self.closed = model.encloses_fluid(self.index)
+        if self.closed:
+            self.band = BAND_SPACINGS * spacing
+        else:
+            self.shape = tuple(body_spec[key] for key in ("nx", "ny", "nz")[:case["dimension"]])
+            thickness = (min(self.shape) - 1) * body_spec["spacing"]
+            self.band = 0.5 * thickness + BAND_SPACINGS * spacing
         group = result.file.require_group("checks").require_group(spec["name"])
         group.attrs["kind"] = spec["kind"]
         group.attrs["body"] = self.body_name
@@ -265,15 +278,21 @@ class BodyCrossing(Observer):
 
     def _beside(self, particles):
         """(ids, sides) of every rank's owned fluid particles beside the body, on rank 0."""
-        body = self.model.body(self.body_name)
-        vertices, facets = lattice_mid_surface(body.position, self.shape)
+        if self.closed:
+            vertices, facets = self.model.boundary(self.index)
+        else:
+            body = self.model.body(self.body_name)
+            vertices, facets = lattice_mid_surface(body.position, self.shape)
         n = particles.n_owned
         kind = particles.kind[:n]
         position = particles.position[:n]
         low, high = vertices.min(axis=0) - self.band, vertices.max(axis=0) + self.band
         near = np.flatnonzero(((kind == FLUID) | (kind == INFLOW)) &
                               np.all((position >= low) & (position <= high), axis=1))
-        sides = mid_surface_sides(position[near], vertices, facets, self.band)
+        if self.closed:
+            sides = closed_surface_sides(position[near], vertices, facets)
+        else:
+            sides = mid_surface_sides(position[near], vertices, facets, self.band)
         keep = sides != 0
         gathered = self.comm.gather((particles.id[:n][near][keep].astype(np.int64),
                                      sides[keep]), root=0)

@@ -11,7 +11,8 @@ SECTIONS = {
     "check": Section({
         "kind": Key("str", choices=tuple(CHECKS),
                     doc="body_crossing: fluid particles whose path crossed a thin lattice "
-                        "body's mid-line (mid-surface in 3D), counted every step"),
+                        "body's mid-line (mid-surface in 3D) or a closed shell's surface, "
+                        "counted every step"),
         "body": Key("str", doc="body_crossing: the body's name"),
         "name": Key("str", "", doc="names /checks/<name> in result.h5; default "
                                    "<kind>_<body>"),
@@ -30,11 +31,11 @@ def check(case):
         body = bodies[spec["body"]]
         if spec["kind"] == "body_crossing":
             counts = [body[key] for key in ("nx", "ny", "nz")[:case["dimension"]]]
-            if body["type"] != "lattice" or min(counts) < 2:
+            if body["type"] != "shell" and (body["type"] != "lattice" or min(counts) < 2):
                 least = " x ".join(["2"] * case["dimension"])
-                raise CaseError(f"{label}.body '{spec['body']}' must be a lattice of at least "
-                                f"{least} nodes: its mid-line (mid-surface in 3D) is the mean "
-                                f"through its thinnest direction")
+                raise CaseError(f"{label}.body '{spec['body']}' must be a shell or a lattice of "
+                                f"at least {least} nodes: its mid-line (mid-surface in 3D) is "
+                                f"the mean through its thinnest direction")
             if not has_fluid(case):
                 raise CaseError(f"{label} counts fluid particles, but the case has no fluid")
         spec["name"] = spec["name"] or f"{spec['kind']}_{spec['body']}"

@@ -166,6 +166,76 @@ def inside_boundary(points, vertices, facets):
     raise ValueError(f"inside_boundary: no inside test for dimension {d}")
 
 
+def surface_distance(points, vertices, triangles, reach):
+    """The distance of each of ``points`` (k, 3) to the triangulated surface ``triangles``
+    (m, 3) of ``vertices`` (n, 3), exact for every point within ``reach`` of it and inf
+    beyond. A point within reach of a triangle lies within reach plus the triangle's
+    circumradius (less than its longest edge) of its centroid, so each point is measured
+    against the triangles a k-d tree of centroids finds there."""
+    from scipy.spatial import cKDTree
+
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    corners = np.asarray(vertices, dtype=float)[np.asarray(triangles, dtype=np.int64)]
+    distance = np.full(len(points), np.inf)
+    if len(points) == 0 or len(corners) == 0:
+        return distance
+    longest = float(edge_lengths(corners).max())
+    near = cKDTree(corners.mean(axis=1)).query_ball_point(points, reach + longest)
+    count = np.fromiter((len(n) for n in near), np.int64, len(near))
+    if count.sum() == 0:
+        return distance
+    starts = np.concatenate([[0], np.cumsum(count)])
+    candidates = np.fromiter((t for n in near for t in n), np.int64, int(count.sum()))
+    distance = _surface_distance(points, corners, starts, candidates)
+    return np.where(distance <= reach, distance, np.inf)
+
+
+@numba.njit(cache=True)
+def _closest_on_triangle(p, a, b, c):
+    """Squared distance from p to the triangle abc (Ericson, Real-Time Collision Detection,
+    5.1.5: the Voronoi regions of the corners, the edges and the face)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = ab @ ap, ac @ ap
+    if d1 <= 0.0 and d2 <= 0.0:
+        q = a
+    else:
+        bp = p - b
+        d3, d4 = ab @ bp, ac @ bp
+        cp = p - c
+        d5, d6 = ab @ cp, ac @ cp
+        vc = d1 * d4 - d3 * d2
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        if d3 >= 0.0 and d4 <= d3:
+            q = b
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+            q = a + d1 / (d1 - d3) * ab
+        elif d6 >= 0.0 and d5 <= d6:
+            q = c
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+            q = a + d2 / (d2 - d6) * ac
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+            q = b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
+        else:
+            total = va + vb + vc
+            q = a + (vb / total) * ab + (vc / total) * ac
+    g = p - q
+    return g @ g
+
+
+@numba.njit(cache=True)
+def _surface_distance(points, corners, starts, candidates):
+    out = np.empty(len(points))
+    for i in range(len(points)):
+        best = np.inf
+        for k in range(starts[i], starts[i + 1]):
+            t = candidates[k]
+            best = min(best, _closest_on_triangle(points[i], corners[t, 0], corners[t, 1],
+                                                  corners[t, 2]))
+        out[i] = np.sqrt(best)
+    return out
+
+
 def format_point(point, spec=".6g", brackets="()"):
     """A point of any dimension for a message: ``(x, y)`` or ``(x, y, z)``."""
     inner = ", ".join(format(float(c), spec) for c in point)

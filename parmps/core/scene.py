@@ -120,7 +120,12 @@ def build(case, solids=None, open_boundaries=None):
     for section, builder in BUILDERS.items():
         for k, spec in enumerate(case[section]):
             name = f"{section}[{k}]"
-            add(name, *builder(spec, spacing, name))
+            position, kind, velocity = builder(spec, spacing, name)
+            if section == "fluid_block" and solids is not None:
+                # A closed shell's nodes take the place of the water at its surface.
+                keep = ~solids.displaces(position, spacing)
+                position, kind, velocity = position[keep], kind[keep], velocity[keep]
+            add(name, position, kind, velocity)
     if solids is not None:
         nodes = solids.node_particles()
         for k, body in enumerate(solids.bodies):

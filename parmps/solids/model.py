@@ -60,6 +60,19 @@ class SolidModel:
         with :func:`parmps.core.geometry.inside_boundary`."""
         raise NotImplementedError
 
+    def displaces(self, points, spacing):
+        """Which of the fluid's lattice ``points`` (k, d) the bodies take the place of: a
+        closed shell's surface stands in for the fluid within its clearance (the fluid on
+        both sides of it stays). Bodies whose nodes sit on the fluid's lattice (a lattice
+        body) displace nothing here: the case leaves their place free, and the scene
+        refuses overlaps."""
+        return np.zeros(len(points), bool)
+
+    def encloses_fluid(self, k):
+        """Whether body k holds fluid inside its boundary (a closed shell): the crossing
+        check then counts particles that change sides of the boundary itself."""
+        return False
+
     # -- time stepping --------------------------------------------------------------------
     def stable_substeps(self):
         """{body name: the longest stable substep [s]}."""

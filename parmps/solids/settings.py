@@ -113,18 +113,6 @@ SECTIONS = {
 }
 
 
-def check_dimension_support(raw, dimension):
-    """Lattice bodies are coupled to a fluid in any d; a closed shell with fluid is refused
-    in one line (its coupling, with the fluid inside it, is not written yet)."""
-    particles = [name for name in PARTICLE_SECTIONS if raw.get(name)]
-    bodies = raw.get("body") if isinstance(raw.get("body"), list) else []
-    for k, spec in enumerate(bodies):
-        if particles and isinstance(spec, dict) and spec.get("type") == "shell":
-            raise CaseError(f"body[{k}] type = \"shell\" with [{particles[0]}]: closed shells "
-                            f"are not coupled to a fluid yet; a shell runs without fluid, "
-                            f"and lattice bodies run in a fluid in 2D and 3D")
-
-
 def check(case):
     if case["body"]:
         # Bodies are small: building them is the cheapest complete check. Its warnings (a

@@ -563,14 +563,15 @@ def curve_errors(time, value, t_ref, v_ref):
 
 
 def carried_body(path, case, body="box", check=None):
-    """A body carried by an inflow (validation/box_in_flow_3d/), in any dimension: its
-    largest |V - V0|/V0, the most fluid particles inside it at any step, how far its
+    """A body carried by an inflow (validation/box_in_flow_3d/, capsule_3d/), in any
+    dimension: its largest |V - V0|/V0, the most fluid particles inside it at any step and
+    how much that count changed (a shell holds its water: any change is a leak), how far its
     centroid travelled along the first inlet's velocity (the flow's direction) by the last
     step and across it, how far the run got and, with ``check`` (a body_crossing check's
     name), the fluid particles that crossed the body.
 
-    Returns a dict: volume_error, fluid_inside, carried [m], across [m], end [s], steps
-    (and crossings).
+    Returns a dict: volume_error, fluid_inside, fluid_inside_change, carried [m],
+    across [m], end [s], steps (and crossings).
     """
     series = solid_series(path, body)
     centroid = np.asarray(series["centroid"])
@@ -583,6 +584,7 @@ def carried_body(path, case, body="box", check=None):
         total = result.checks[check]["total"] if check else None
     measured = {"volume_error": float(np.abs(series["volume_error"]).max()),
                 "fluid_inside": int(np.max(series["fluid_inside"])),
+                "fluid_inside_change": int(np.ptp(series["fluid_inside"])),
                 "carried": along, "across": float(np.linalg.norm(travel - along * flow)),
                 "end": float(time[-1]), "steps": int(len(time))}
     if check:

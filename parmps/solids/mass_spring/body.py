@@ -245,7 +245,8 @@ class Body:
 
     def __init__(self, name, position, velocity, mass, springs, stiffness, damping,
                  boundary, volume_constraint=True, pinned=None, gravity=None,
-                 loads=(), anchors=0, outline=None, axial_damping=False):
+                 loads=(), anchors=0, outline=None, axial_damping=False,
+                 encloses_fluid=False):
         self.name = name
         self.position = np.array(np.atleast_2d(position), dtype=float)
         n, d = self.position.shape
@@ -258,6 +259,8 @@ class Body:
         # Dashpots along the springs (elastic materials) instead of on the whole
         # relative velocity, which would also damp a rigid rotation.
         self.axial_damping = bool(axial_damping)
+        # A closed shell with fluid inside it (build.py sets it for type = "shell").
+        self.encloses_fluid = bool(encloses_fluid)
         separation = self.position[self.springs[:, 0]] - self.position[self.springs[:, 1]]
         self.rest_length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
         self.boundary = np.asarray(boundary, dtype=np.int64)

@@ -391,7 +391,8 @@ def build_body(k, spec, gravity, domain=None):
     body = Body(name, position, velocity, mass, springs, stiffness, damping, boundary,
                 volume_constraint=spec["volume_constraint"], pinned=pinned,
                 gravity=gravity if spec["gravity"] else np.zeros(dimension), loads=loads,
-                anchors=len(anchors), outline=outline, axial_damping=axial_damping)
+                anchors=len(anchors), outline=outline, axial_damping=axial_damping,
+                encloses_fluid=spec["type"] == "shell")
     if body.rest_volume <= 0.0:
         raise CaseError(f"{label}: its boundary encloses no volume ({body.rest_volume:.6g})")
     log.debug("body %s: %d nodes, %d springs, volume %.6g, %d pinned, %d loads", name, n,

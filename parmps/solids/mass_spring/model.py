@@ -17,6 +17,7 @@ import numpy as np
 from parmps.errors import CaseError, RunFailure
 from parmps.solids.mass_spring.body import boundary_facets, substep_count
 from parmps.solids.mass_spring.build import build_bodies
+from parmps.solids.mass_spring.shell import displaced_by_shell
 from parmps.solids.model import SolidModel
 
 # The volume constraint holds |V - V0|/V0 near 1e-12; ten percent means the
@@ -145,6 +146,16 @@ class MassSpringModel(SolidModel):
         # the fluid inside its material, not between it and the wall.
         body = self.bodies[k]
         return body.position, boundary_facets(body.outline)
+
+    def displaces(self, points, spacing):
+        taken = np.zeros(len(points), bool)
+        for body in self.bodies:
+            if body.encloses_fluid:
+                taken |= displaced_by_shell(points, body.position, body.facets, spacing)
+        return taken
+
+    def encloses_fluid(self, k):
+        return self.bodies[k].encloses_fluid
 
     def kinetic_energy(self):
         return sum(body.energy()[0] for body in self.bodies)
