@@ -30,11 +30,6 @@ SECTIONS = {name: section for component in COMPONENTS
 def validate(raw):
     """Check a parsed case (a dict) against every component; returns it with defaults."""
     dimension = core.check_dimension(raw) if isinstance(raw, dict) else 2
-    if isinstance(raw, dict):
-        # What a component cannot do in this dimension, said before its keys are read.
-        for component in COMPONENTS:
-            if hasattr(component, "check_dimension_support"):
-                component.check_dimension_support(raw, dimension)
     case = config.validate_sections(raw, SECTIONS, dimension)
     case["dimension"] = dimension
     for component in COMPONENTS:

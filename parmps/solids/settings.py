@@ -4,9 +4,10 @@ import logging
 import math
 
 from parmps.config import ZERO, Key, Section
-from parmps.core.settings import PARTICLE_SECTIONS
+from parmps.core.settings import PARTICLE_SECTIONS, has_fluid
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.shell import KEYS as SHELL_KEYS
+from parmps.solids.mass_spring.shell import check_shell_in_fluid
 
 # The sides of a body a node set may name: x, y (3D only) and the last axis.
 SIDES = ("left", "right", "front", "back", "bottom", "top")
@@ -123,6 +124,11 @@ def check(case):
         level = quiet.level
         quiet.setLevel(logging.ERROR)
         try:
-            build_bodies(case)
+            bodies = build_bodies(case)
         finally:
             quiet.setLevel(level)
+        if has_fluid(case):
+            for k, body in enumerate(bodies):
+                if body.encloses_fluid:
+                    check_shell_in_fluid(f"body[{k}] '{body.name}'", body.position,
+                                         body.facets, case["particles"]["spacing"])
