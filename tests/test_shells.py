@@ -542,7 +542,7 @@ def _brute_distance(points, vertices, triangles):
     """Distance to every triangle, by projecting on its plane or else its three edges."""
     from parmps.core.geometry import _closest_on_triangle
     corners = vertices[triangles]
-    return np.array([math.sqrt(min(_closest_on_triangle(p, *c) for c in corners))
+    return np.array([math.sqrt(min(_closest_on_triangle(p, *c)[0] for c in corners))
                      for p in points])
 
 

@@ -166,39 +166,53 @@ def inside_boundary(points, vertices, facets):
     raise ValueError(f"inside_boundary: no inside test for dimension {d}")
 
 
-def surface_distance(points, vertices, triangles, reach):
-    """The distance of each of ``points`` (k, 3) to the triangulated surface ``triangles``
-    (m, 3) of ``vertices`` (n, 3), exact for every point within ``reach`` of it and inf
-    beyond. A point within reach of a triangle lies within reach plus the triangle's
-    circumradius (less than its longest edge) of its centroid, so each point is measured
-    against the triangles a k-d tree of centroids finds there."""
+def _near_triangles(points, corners, reach):
+    """For each point the triangles whose centroid lies within reach plus the longest edge
+    (every triangle within reach of it, since a triangle's points lie within its
+    circumradius, less than its longest edge, of its centroid): (starts, candidates), a
+    ragged list."""
     from scipy.spatial import cKDTree
 
-    points = np.asarray(points, dtype=float).reshape(-1, 3)
-    corners = np.asarray(vertices, dtype=float)[np.asarray(triangles, dtype=np.int64)]
-    distance = np.full(len(points), np.inf)
-    if len(points) == 0 or len(corners) == 0:
-        return distance
     longest = float(edge_lengths(corners).max())
     near = cKDTree(corners.mean(axis=1)).query_ball_point(points, reach + longest)
     count = np.fromiter((len(n) for n in near), np.int64, len(near))
-    if count.sum() == 0:
-        return distance
     starts = np.concatenate([[0], np.cumsum(count)])
-    candidates = np.fromiter((t for n in near for t in n), np.int64, int(count.sum()))
-    distance = _surface_distance(points, corners, starts, candidates)
-    return np.where(distance <= reach, distance, np.inf)
+    return starts, np.fromiter((t for n in near for t in n), np.int64, int(count.sum()))
+
+
+def nearest_on_surface(points, vertices, triangles, reach):
+    """The nearest point of the triangulated surface ``triangles`` (m, 3) of ``vertices``
+    (n, 3) to each of ``points`` (k, 3) within ``reach``: (distance (k,), triangle (k,),
+    barycentric weights (k, 3) of its corners). Beyond reach: inf, -1 and zeros."""
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    corners = np.asarray(vertices, dtype=float)[np.asarray(triangles, dtype=np.int64)]
+    distance = np.full(len(points), np.inf)
+    triangle = np.full(len(points), -1, np.int64)
+    weights = np.zeros((len(points), 3))
+    if len(points) == 0 or len(corners) == 0:
+        return distance, triangle, weights
+    starts, candidates = _near_triangles(points, corners, reach)
+    _nearest_on_surface(points, corners, starts, candidates, distance, triangle, weights)
+    beyond = distance > reach
+    distance[beyond], triangle[beyond], weights[beyond] = np.inf, -1, 0.0
+    return distance, triangle, weights
+
+
+def surface_distance(points, vertices, triangles, reach):
+    """The distance of each of ``points`` (k, 3) to the triangulated surface, exact within
+    ``reach`` and inf beyond (:func:`nearest_on_surface`)."""
+    return nearest_on_surface(points, vertices, triangles, reach)[0]
 
 
 @numba.njit(cache=True)
 def _closest_on_triangle(p, a, b, c):
-    """Squared distance from p to the triangle abc (Ericson, Real-Time Collision Detection,
-    5.1.5: the Voronoi regions of the corners, the edges and the face)."""
+    """(squared distance, u, v, w) from p to the triangle abc, its nearest point being
+    u a + v b + w c (Ericson, Real-Time Collision Detection, 5.1.5: the Voronoi regions
+    of the corners, the edges and the face)."""
     ab, ac, ap = b - a, c - a, p - a
     d1, d2 = ab @ ap, ac @ ap
-    if d1 <= 0.0 and d2 <= 0.0:
-        q = a
-    else:
+    u, v, w = 1.0, 0.0, 0.0
+    if d1 > 0.0 or d2 > 0.0:
         bp = p - b
         d3, d4 = ab @ bp, ac @ bp
         cp = p - c
@@ -207,33 +221,39 @@ def _closest_on_triangle(p, a, b, c):
         vb = d5 * d2 - d1 * d6
         va = d3 * d6 - d5 * d4
         if d3 >= 0.0 and d4 <= d3:
-            q = b
+            u, v, w = 0.0, 1.0, 0.0
         elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-            q = a + d1 / (d1 - d3) * ab
+            t = d1 / (d1 - d3)
+            u, v, w = 1.0 - t, t, 0.0
         elif d6 >= 0.0 and d5 <= d6:
-            q = c
+            u, v, w = 0.0, 0.0, 1.0
         elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-            q = a + d2 / (d2 - d6) * ac
+            t = d2 / (d2 - d6)
+            u, v, w = 1.0 - t, 0.0, t
         elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-            q = b + (d4 - d3) / ((d4 - d3) + (d5 - d6)) * (c - b)
+            t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            u, v, w = 0.0, 1.0 - t, t
         else:
             total = va + vb + vc
-            q = a + (vb / total) * ab + (vc / total) * ac
-    g = p - q
-    return g @ g
+            v, w = vb / total, vc / total
+            u = 1.0 - v - w
+    g = p - (u * a + v * b + w * c)
+    return g @ g, u, v, w
 
 
 @numba.njit(cache=True)
-def _surface_distance(points, corners, starts, candidates):
-    out = np.empty(len(points))
+def _nearest_on_surface(points, corners, starts, candidates, distance, triangle, weights):
     for i in range(len(points)):
         best = np.inf
         for k in range(starts[i], starts[i + 1]):
             t = candidates[k]
-            best = min(best, _closest_on_triangle(points[i], corners[t, 0], corners[t, 1],
-                                                  corners[t, 2]))
-        out[i] = np.sqrt(best)
-    return out
+            d2, u, v, w = _closest_on_triangle(points[i], corners[t, 0], corners[t, 1],
+                                               corners[t, 2])
+            if d2 < best:  # the first nearest triangle
+                best = d2
+                triangle[i] = t
+                weights[i, 0], weights[i, 1], weights[i, 2] = u, v, w
+        distance[i] = np.sqrt(best)
 
 
 def format_point(point, spec=".6g", brackets="()"):
