@@ -511,9 +511,9 @@ def test_a_shell_too_coarse_to_hold_the_water_is_refused_in_one_line(tmp_path):
     assert result.returncode == 2
     assert error_lines(result.stderr) == [
         f"parmps: error: {path}: body[0] 'capsule': its mean edge 0.01409 m is 1.41 particle "
-        f"spacings; in a fluid a shell's nodes are particles of it and must lie at most 1.25 "
-        f"spacings apart on average, or the water passes between them: refine the shell "
-        f"(spacing or refinement)"]
+        f"spacings; in a fluid a shell's nodes are particles of it, standing for the water "
+        f"they displace, and must lie at most 1.25 spacings apart on average: refine the "
+        f"shell (spacing or refinement)"]
 
 
 def test_a_3d_body_off_the_particle_spacing_is_refused(tank_case):
@@ -599,3 +599,37 @@ def test_the_capsule_meets_its_validation_on_two_ranks(tmp_path):
     verdicts = check.verdicts(measured)
     assert set(verdicts) == set(check.tolerance), verdicts
     assert all(verdict["pass"] for verdict in verdicts.values()), verdicts
+
+
+def test_a_particle_through_a_shell_is_held_back_to_its_side():
+    """hold_to_side: a particle found outside a sphere it was inside goes back a given depth
+    below the surface's nearest point, and loses only the part of its velocity relative to
+    the surface that points out of its side; one found inside that was outside goes out."""
+    from parmps.coupling.weak import hold_to_side
+    vertices, facets = icosphere(0.03, 8)
+    node_velocity = np.tile([0.01, 0.0, 0.0], (len(vertices), 1))
+    direction = np.array([[1.0, 2.0, 2.0], [-2.0, 1.0, -2.0]]) / 3.0
+    position = direction * np.array([[0.0302], [0.0296]])
+    velocity = np.array([[0.2, 0.1, 0.3], [0.05, -0.02, 0.01]])
+    side = np.array([1, -1])  # the first was inside, the second outside
+    before = velocity.copy()
+    wrong = hold_to_side(position, velocity, side, vertices, node_velocity, facets, 0.0025,
+                         0.02)
+    assert len(wrong) == 0
+    assert inside_boundary(position, vertices, facets).tolist() == [True, False]
+    distance = surface_distance(position, vertices, facets, 0.01)
+    np.testing.assert_allclose(distance, 0.0025, rtol=1e-9)
+    # The mesh's normal is within its facets' tilt of the radial direction.
+    radial = position / np.linalg.norm(position, axis=1)[:, None]
+    for k, into in enumerate([-radial[0], radial[1]]):
+        relative_before = (before[k] - node_velocity[0]) @ into
+        relative_after = (velocity[k] - node_velocity[0]) @ into
+        assert relative_before < 0.0 and abs(relative_after) < 0.05 * abs(relative_before)
+        tangential = velocity[k] - before[k]
+        assert np.linalg.norm(np.cross(tangential, into)) < 0.05 * np.linalg.norm(tangential)
+    # A particle moving into its side keeps its velocity.
+    position = np.array([[0.0, 0.0, 0.0301]])
+    velocity = np.array([[0.0, 0.0, -0.1]])
+    hold_to_side(position, velocity, np.array([1]), vertices, 0.0 * node_velocity, facets,
+                 0.0025, 0.02)
+    np.testing.assert_array_equal(velocity, [[0.0, 0.0, -0.1]])

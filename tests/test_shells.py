@@ -10,7 +10,7 @@ import pytest
 import parmps
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, schema, validation
-from parmps.core.geometry import surface_distance, winding_number
+from parmps.core.geometry import nearest_on_surface, surface_distance, winding_number
 from parmps.errors import CaseError
 from parmps.solids.mass_spring import shell
 from parmps.solids.mass_spring.model import MassSpringModel
@@ -556,6 +556,15 @@ def test_the_distance_to_a_surface_is_the_least_over_its_triangles():
     assert 50 < within.sum() < 350
     np.testing.assert_allclose(near[within], exact[within], rtol=0, atol=1e-15)
     assert np.all(np.isinf(near[~within]))
+    # The nearest point: its triangle's corners weighed by the barycentric weights.
+    distance, triangle, weights = nearest_on_surface(points, vertices, triangles, 0.008)
+    np.testing.assert_array_equal(distance, near)
+    assert np.all(triangle[~within] == -1) and np.all(weights[~within] == 0.0)
+    assert weights.min() >= 0.0
+    np.testing.assert_allclose(weights[within].sum(axis=1), 1.0, rtol=0, atol=1e-14)
+    nearest = np.einsum("kc,kcd->kd", weights[within], vertices[triangles[triangle[within]]])
+    np.testing.assert_allclose(np.linalg.norm(points[within] - nearest, axis=1),
+                               exact[within], rtol=0, atol=1e-15)
     # On a sphere: |r - R| to the inscribed mesh's accuracy (its sag, below 1 % of R here).
     vertices, triangles = shell.icosphere(1.0, 16)
     radius = np.linalg.norm(points - points.mean(axis=0), axis=1)

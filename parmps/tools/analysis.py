@@ -570,8 +570,9 @@ def carried_body(path, case, body="box", check=None):
     step and across it, how far the run got and, with ``check`` (a body_crossing check's
     name), the fluid particles that crossed the body.
 
-    Returns a dict: volume_error, fluid_inside, fluid_inside_change, carried [m],
-    across [m], end [s], steps (and crossings).
+    Returns a dict: volume_error, fluid_inside, fluid_inside_change, held_back (the
+    particles a closed shell held to their side over the run), carried [m], across [m],
+    end [s], steps (and crossings).
     """
     series = solid_series(path, body)
     centroid = np.asarray(series["centroid"])
@@ -585,6 +586,7 @@ def carried_body(path, case, body="box", check=None):
     measured = {"volume_error": float(np.abs(series["volume_error"]).max()),
                 "fluid_inside": int(np.max(series["fluid_inside"])),
                 "fluid_inside_change": int(np.ptp(series["fluid_inside"])),
+                "held_back": int(np.sum(series["held_back"])) if "held_back" in series else 0,
                 "carried": along, "across": float(np.linalg.norm(travel - along * flow)),
                 "end": float(time[-1]), "steps": int(len(time))}
     if check:

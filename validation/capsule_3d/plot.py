@@ -44,7 +44,7 @@ def sections(result, axes):
                              c=frame["pressure"][water], cmap="viridis")
         shell = near & (kind == SOLID)
         axis.scatter(position[shell, 0], position[shell, 2], s=14, c="tab:red")
-        axis.set(aspect="equal", xlim=(0.0, 0.26), ylim=(0.0, 0.13), xlabel="x [m]",
+        axis.set(aspect="equal", xlim=(0.0, 0.40), ylim=(0.0, 0.13), xlabel="x [m]",
                  title=f"t = {frame.time:.2f} s")
     axes[0].set_ylabel("z [m]")
     return shown
@@ -60,7 +60,7 @@ def main(argv):
                             timeout=None, root=ROOT, cwd=ROOT)
         if record["status"] != 0:
             sys.exit(f"{record['command']}: {record['outcome']}")
-    figure = plt.figure(figsize=(13, 6.5))
+    figure = plt.figure(figsize=(15, 6))
     grid = figure.add_gridspec(2, 3)
     with parmps.open_result(out) as result:
         shown = sections(result, [figure.add_subplot(grid[0, k]) for k in range(3)])

@@ -672,9 +672,11 @@ def fluid_clearance(vertices, triangles, spacing):
     return max(0.5 * spacing, 0.5 * spacing ** 3 / per_node)
 
 
-# The longest mean edge, in particle spacings, of a shell in a fluid. The capsule of
-# cases/capsule_3d.toml held its water with a mean edge of 1.11 l0 and let 4 particles
-# through at 1.41 l0 and 36 at 1.91 l0 (validation/capsule_3d/README.md).
+# The longest mean edge, in particle spacings, of a shell in a fluid. Its nodes stand for
+# the fluid they displace: at a mean edge of 1.41 l0 the capsule of cases/capsule_3d.toml
+# has 114 nodes where the layer within half a spacing of it held 178 lattice points, and
+# before the coupling held the water to its side it let 4 particles through there and 36 at
+# 1.91 l0 (validation/capsule_3d/README.md).
 MAX_EDGE_IN_FLUID = 1.25
 
 
@@ -684,8 +686,8 @@ def check_shell_in_fluid(label, vertices, triangles, spacing):
     if mean > MAX_EDGE_IN_FLUID * spacing:
         raise CaseError(f"{label}: its mean edge {mean:.4g} m is {mean / spacing:.2f} "
                         f"particle spacings; in a fluid a shell's nodes are particles of "
-                        f"it and must lie at most {MAX_EDGE_IN_FLUID} spacings apart on "
-                        f"average, or the water passes between them: refine the shell "
+                        f"it, standing for the water they displace, and must lie at most "
+                        f"{MAX_EDGE_IN_FLUID} spacings apart on average: refine the shell "
                         f"(spacing or refinement)")
 
 
