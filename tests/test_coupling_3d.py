@@ -12,9 +12,10 @@ from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
 from parmps import open_result, schema
-from parmps.checks.crossing import (closed_surface_sides, count_crossings, lattice_mid_line,
-                                    lattice_mid_surface, mid_line_sides, mid_surface_sides)
-from parmps.core.geometry import inside_boundary, point_in_polygon, surface_distance
+from parmps.checks.crossing import (count_crossings, lattice_mid_line, lattice_mid_surface,
+                                    mid_line_sides, mid_surface_sides)
+from parmps.core.geometry import (closed_surface_sides, inside_boundary, point_in_polygon,
+                                  surface_distance)
 from parmps.core.particles import FLUID, SOLID, WALL, Particles
 from parmps.coupling.weak import fluid_inside
 from parmps.errors import CaseError

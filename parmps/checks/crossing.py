@@ -34,7 +34,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from parmps.core.geometry import cell_runs, edge_lengths, inside_boundary
+from parmps.core.geometry import cell_runs, closed_surface_sides, edge_lengths
 from parmps.core.particles import FLUID, INFLOW
 from parmps.io.series import Series
 from parmps.run.observers import Observer
@@ -226,13 +226,6 @@ def _sides_kernel(points, a, b, c, unit, edge_normal, start, end, band):
     return sides
 
 
-def closed_surface_sides(points, vertices, facets):
-    """Side of a closed outward surface of each of ``points``: +1 inside, -1 outside. The
-    check gives every particle within the band of the surface's box a side; one that moves
-    less than the band in a step (time.cfl <= 1) and changes sides went through it."""
-    return np.where(inside_boundary(points, vertices, facets), 1, -1).astype(np.int8)
-
-
 def count_crossings(previous_ids, previous_sides, ids, sides):
     """How many particles are beside the body on opposite sides now and before (ids sorted
     or not; each id at most once in each set)."""
@@ -290,6 +283,8 @@ class BodyCrossing(Observer):
         near = np.flatnonzero(((kind == FLUID) | (kind == INFLOW)) &
                               np.all((position >= low) & (position <= high), axis=1))
         if self.closed:
+            # Every particle in the box has a side; one that moves less than the band in a
+            # step (time.cfl <= 1) and changes sides went through the surface.
             sides = closed_surface_sides(position[near], vertices, facets)
         else:
             sides = mid_surface_sides(position[near], vertices, facets, self.band)

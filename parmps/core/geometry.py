@@ -256,6 +256,12 @@ def _nearest_on_surface(points, corners, starts, candidates, distance, triangle,
         distance[i] = np.sqrt(best)
 
 
+def closed_surface_sides(points, vertices, facets):
+    """Side of the closed boundary ``facets`` of each of ``points``: +1 inside, -1 outside
+    (:func:`inside_boundary`), as int8."""
+    return np.where(inside_boundary(points, vertices, facets), 1, -1).astype(np.int8)
+
+
 def format_point(point, spec=".6g", brackets="()"):
     """A point of any dimension for a message: ``(x, y)`` or ``(x, y, z)``."""
     inner = ", ".join(format(float(c), spec) for c in point)

@@ -55,7 +55,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.core import kernels
-from parmps.core.geometry import inside_boundary, nearest_on_surface
+from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
 from parmps.core.lattice import neighbour_count_reference
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID
@@ -71,6 +71,7 @@ HOLD_DEPTH = 0.25
 # Particles are given a side within this many spacings of a shell's box: one moves less
 # than a spacing a step (time.cfl <= 1), so one that crosses has a side before and after.
 SIDE_BAND = 2.0
+
 
 def fluid_forces(particles, rows, constants, gradient):
     """Fluid force on the particles ``rows`` (owned): ``-V grad P + V mu lap u``.
@@ -189,8 +190,7 @@ def shell_sides(particles, vertices, facets, band):
     low, high = vertices.min(axis=0) - band, vertices.max(axis=0) + band
     rows = np.flatnonzero(((kind == FLUID) | (kind == INFLOW))
                           & np.all((position >= low) & (position <= high), axis=1))
-    inside = inside_boundary(position[rows], vertices, facets)
-    return rows, particles.id[rows], np.where(inside, 1, -1).astype(np.int8)
+    return rows, particles.id[rows], closed_surface_sides(position[rows], vertices, facets)
 
 
 def hold_to_side(position, velocity, side, vertices, node_velocity, facets, depth, reach):
@@ -199,7 +199,7 @@ def hold_to_side(position, velocity, side, vertices, node_velocity, facets, dept
     nearest triangle's normal, its velocity relative to the surface there (the corners'
     velocities, barycentric) stripped of the part pointing out of its side. Arrays in
     place; returns the indices of those still on the wrong side."""
-    distance, triangle, weights = nearest_on_surface(position, vertices, facets, reach)
+    _, triangle, weights = nearest_on_surface(position, vertices, facets, reach)
     found = triangle >= 0
     corners = vertices[facets[triangle[found]]]
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
@@ -210,8 +210,7 @@ def hold_to_side(position, velocity, side, vertices, node_velocity, facets, dept
     surface = np.einsum("kc,kcd->kd", weights[found], node_velocity[facets[triangle[found]]])
     relative = np.einsum("kd,kd->k", velocity[found] - surface, into)
     velocity[found] -= np.minimum(relative, 0.0)[:, None] * into
-    now = np.where(inside_boundary(position, vertices, facets), 1, -1)
-    return np.flatnonzero(now != side)
+    return np.flatnonzero(closed_surface_sides(position, vertices, facets) != side)
 
 
 class WeakCoupling(Participant):
