@@ -548,6 +548,40 @@ def test_the_3d_box_meets_its_validation_on_two_ranks(tmp_path, density):
     assert all(verdict["pass"] for verdict in verdicts.values()), verdicts
 
 
+def test_a_particle_through_a_shell_is_held_back_to_its_side():
+    """hold_to_side: a particle found outside a sphere it was inside goes back a given depth
+    below the surface's nearest point, and loses only the part of its velocity relative to
+    the surface that points out of its side; one found inside that was outside goes out."""
+    from parmps.coupling.weak import hold_to_side
+    vertices, facets = icosphere(0.03, 8)
+    node_velocity = np.tile([0.01, 0.0, 0.0], (len(vertices), 1))
+    direction = np.array([[1.0, 2.0, 2.0], [-2.0, 1.0, -2.0]]) / 3.0
+    position = direction * np.array([[0.0302], [0.0296]])
+    velocity = np.array([[0.2, 0.1, 0.3], [0.05, -0.02, 0.01]])
+    side = np.array([1, -1])  # the first was inside, the second outside
+    before = velocity.copy()
+    wrong = hold_to_side(position, velocity, side, vertices, node_velocity, facets, 0.0025,
+                         0.02)
+    assert len(wrong) == 0
+    assert inside_boundary(position, vertices, facets).tolist() == [True, False]
+    distance = surface_distance(position, vertices, facets, 0.01)
+    np.testing.assert_allclose(distance, 0.0025, rtol=1e-9)
+    # The mesh's normal is within its facets' tilt of the radial direction.
+    radial = position / np.linalg.norm(position, axis=1)[:, None]
+    for k, into in enumerate([-radial[0], radial[1]]):
+        relative_before = (before[k] - node_velocity[0]) @ into
+        relative_after = (velocity[k] - node_velocity[0]) @ into
+        assert relative_before < 0.0 and abs(relative_after) < 0.05 * abs(relative_before)
+        tangential = velocity[k] - before[k]
+        assert np.linalg.norm(np.cross(tangential, into)) < 0.05 * np.linalg.norm(tangential)
+    # A particle moving into its side keeps its velocity.
+    position = np.array([[0.0, 0.0, 0.0301]])
+    velocity = np.array([[0.0, 0.0, -0.1]])
+    hold_to_side(position, velocity, np.array([1]), vertices, 0.0 * node_velocity, facets,
+                 0.0025, 0.02)
+    np.testing.assert_array_equal(velocity, [[0.0, 0.0, -0.1]])
+
+
 # -- the fluid-filled capsule ----------------------------------------------------------------
 
 @pytest.mark.mpi
