@@ -35,7 +35,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from parmps.core.geometry import cell_runs, closed_surface_sides, edge_lengths
-from parmps.core.particles import FLUID, INFLOW
+from parmps.core.particles import owned_fluid_in_box
 from parmps.io.series import Series
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
@@ -276,12 +276,9 @@ class BodyCrossing(Observer):
         else:
             body = self.model.body(self.body_name)
             vertices, facets = lattice_mid_surface(body.position, self.shape)
-        n = particles.n_owned
-        kind = particles.kind[:n]
-        position = particles.position[:n]
-        low, high = vertices.min(axis=0) - self.band, vertices.max(axis=0) + self.band
-        near = np.flatnonzero(((kind == FLUID) | (kind == INFLOW)) &
-                              np.all((position >= low) & (position <= high), axis=1))
+        near = owned_fluid_in_box(particles, vertices.min(axis=0) - self.band,
+                                  vertices.max(axis=0) + self.band)
+        position = particles.position
         if self.closed:
             # Every particle in the box has a side; one that moves less than the band in a
             # step (time.cfl <= 1) and changes sides went through the surface.
@@ -289,7 +286,7 @@ class BodyCrossing(Observer):
         else:
             sides = mid_surface_sides(position[near], vertices, facets, self.band)
         keep = sides != 0
-        gathered = self.comm.gather((particles.id[:n][near][keep].astype(np.int64),
+        gathered = self.comm.gather((particles.id[near][keep].astype(np.int64),
                                      sides[keep]), root=0)
         if self.comm.rank != 0:
             return None, None

@@ -58,7 +58,7 @@ from parmps.core import kernels
 from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
 from parmps.core.lattice import neighbour_count_reference
 from parmps.core.neighbours import pair_list
-from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID
+from parmps.core.particles import DUMMY, SOLID, owned_fluid_in_box
 from parmps.errors import RunFailure
 from parmps.fluid.participant import Participant
 
@@ -165,32 +165,25 @@ def fluid_inside(particles, vertices, facets, comm):
     """How many fluid (or inflow) particles lie inside the closed boundary ``facets`` (m, d)
     of ``vertices`` (n, d): a body's, as its model gives it (``SolidModel.boundary``).
     Collective."""
-    n = particles.n_owned
-    kind = particles.kind[:n]
-    position = particles.position[:n]
     used = np.asarray(vertices)[np.unique(np.asarray(facets, dtype=np.int64))] \
-        if len(facets) else np.zeros((0, position.shape[1]))
+        if len(facets) else np.zeros((0, particles.position.shape[1]))
     local = 0
     if len(used):
         # Only particles in the boundary's box can be inside: the test costs
         # particles x facets.
-        low, high = used.min(axis=0), used.max(axis=0)
-        near = ((kind == FLUID) | (kind == INFLOW)) & np.all((position >= low) &
-                                                            (position <= high), axis=1)
-        local = int(np.count_nonzero(inside_boundary(position[near], vertices, facets)))
+        near = owned_fluid_in_box(particles, used.min(axis=0), used.max(axis=0))
+        local = int(np.count_nonzero(inside_boundary(particles.position[near], vertices,
+                                                     facets)))
     return comm.allreduce(local, op=MPI.SUM)
 
 
 def shell_sides(particles, vertices, facets, band):
     """(rows, ids, sides) of the owned fluid (or inflow) particles within ``band`` of the
     closed surface's box: +1 inside, -1 outside."""
-    n = particles.n_owned
-    kind = particles.kind[:n]
-    position = particles.position[:n]
-    low, high = vertices.min(axis=0) - band, vertices.max(axis=0) + band
-    rows = np.flatnonzero(((kind == FLUID) | (kind == INFLOW))
-                          & np.all((position >= low) & (position <= high), axis=1))
-    return rows, particles.id[rows], closed_surface_sides(position[rows], vertices, facets)
+    rows = owned_fluid_in_box(particles, vertices.min(axis=0) - band,
+                              vertices.max(axis=0) + band)
+    return rows, particles.id[rows], closed_surface_sides(particles.position[rows], vertices,
+                                                          facets)
 
 
 def hold_to_side(position, velocity, side, vertices, node_velocity, facets, depth, reach):

@@ -4,8 +4,7 @@ import logging
 import math
 
 from parmps.config import ZERO, Key, Section
-from parmps.core.settings import PARTICLE_SECTIONS, has_fluid
-from parmps.errors import CaseError
+from parmps.core.settings import has_fluid
 from parmps.solids.mass_spring.shell import KEYS as SHELL_KEYS
 from parmps.solids.mass_spring.shell import check_shell_in_fluid
 
