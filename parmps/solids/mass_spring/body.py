@@ -43,6 +43,7 @@ import numpy as np
 
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.kernels import body_substeps, held_force_substeps, network_forces
+from parmps.solids.mass_spring.statics import highest_frequency, stiffness_matrix
 from parmps.solids.mass_spring.surface import determinant_terms, enclosed_volume, volume_gradient
 
 log = logging.getLogger(__name__)
@@ -343,8 +344,16 @@ class Body:
                 spring_energy(self.position, self.springs, self.rest_length, self.stiffness))
 
     def stability_limit(self):
-        """The Verlet step limit of this body [s]."""
-        omega, rate = stiffest_frequency(self.mass, self.springs, self.stiffness, self.damping)
+        """The Verlet step limit of this body [s], from its highest frequency at rest.
+
+        The network's own highest frequency (statics.highest_frequency), not the per-node
+        bound of :func:`stiffest_frequency`: in a cubic lattice that bound is twice the
+        true frequency, and the substeps it asked for cost twice what is needed. The
+        damping rate keeps its node bound.
+        """
+        _, rate = stiffest_frequency(self.mass, self.springs, self.stiffness, self.damping)
+        omega = highest_frequency(stiffness_matrix(self.position, self.springs, self.stiffness),
+                                  self.mass)
         return verlet_limit(omega, rate)
 
     # -- dynamics --------------------------------------------------------------
