@@ -131,10 +131,11 @@ class Simulation:
         if self.model is not None and self.decomposition is None:
             counts = self.model.substep_counts(summary["initial_dt"])
             substeps = self.model.stable_substeps()
+            limits = self.model.stability_limits()
             summary["bodies"] = {body.name: {
                 "nodes": body.n_nodes, "springs": len(body.springs),
                 "area": body.rest_volume, "volume_constraint": body.volume_constraint,
-                "stability_limit": body.stability_limit(),
+                "stability_limit": limits[body.name],
                 "substep": substeps[body.name],
                 "substeps_per_step": counts[body.name],
             } for body in self.model.bodies}

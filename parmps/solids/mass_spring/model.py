@@ -57,11 +57,13 @@ class MassSpringModel(SolidModel):
                        "newton_steps": ()}
         self.safety = float(safety)
         self.fixed_substep = float(substep)
+        # The limits are eigen solves: computed once, for the substeps and the summary.
+        self.limits = {body.name: body.stability_limit() for body in self.bodies}
         self.substeps = {body.name: self._substep_of(body) for body in self.bodies}
         self.last_substep_counts = {body.name: 0 for body in self.bodies}
 
     def _substep_of(self, body):
-        limit = body.stability_limit()
+        limit = self.limits[body.name]
         if self.fixed_substep > 0.0:
             if self.fixed_substep >= limit:
                 raise CaseError(f"solid.substep ({self.fixed_substep:.6g} s) is above the "
@@ -127,6 +129,10 @@ class MassSpringModel(SolidModel):
 
     def stable_substeps(self):
         return dict(self.substeps)
+
+    def stability_limits(self):
+        """Each body's Verlet step limit [s], as the substeps were chosen from it."""
+        return dict(self.limits)
 
     def advance_body(self, k, time, dt):
         body = self.bodies[k]
