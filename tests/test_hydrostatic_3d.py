@@ -7,11 +7,18 @@ which are asserted; it misses the bottom row's mean (-2.4 %), the RMS (2.2 %) an
 probe (-3.7 %), which converge with the spacing (1 cm, the validation's second run in its
 README: bottom -1.04 %, RMS 0.78 %, probe -1.4 %, noise 0.27 %, height -0.30 %). Those
 misses are recorded in the README and the 3D issue, not asserted here.
+
+Where they come from (docs/validation/hydrostatic_3d.md) is checked on the same run with
+validation/hydrostatic_3d/profile.py: away from the walls, every row from 1 l0 up reads a
+hydrostatic level within 0.2 l0 of the water's depth (measured on 1 rank over 0.5-2 s:
+0.10-0.14 l0 low), and the bottom row's dip below them stays under 0.4 l0 (measured: 0.12 l0).
 """
+
+import importlib.util
 
 import pytest
 
-from conftest import run_parmps
+from conftest import ROOT, run_parmps
 from parmps import validation
 
 HYDROSTATIC_3D = validation.load("hydrostatic_3d")
@@ -29,3 +36,19 @@ def test_the_3d_still_tank_holds_its_noise_and_height_targets_at_the_coarser_spa
     measured = HYDROSTATIC_3D.measure(tmp_path / "result.h5")
     assert measured["bottom_std"] < tolerance["bottom_noise"], measured["bottom_std"]
     assert abs(measured["height_drift"]) < tolerance["height_drift"], measured["height_drift"]
+    rows, _, depth = _profile_module().profile(tmp_path / "result.h5",
+                                               HYDROSTATIC_3D.metric["settle_time"])
+    interior = {bottom: zero for name, bottom, _, zero in rows
+                if name == "fluid away from the side walls"}
+    assert set(interior) >= set(range(int(depth))), interior
+    above_floor = [interior[bottom] for bottom in range(1, int(depth) - 1)]
+    assert all(abs(zero - depth) < 0.2 for zero in above_floor), interior
+    assert min(above_floor) - interior[0] < 0.4, interior
+
+
+def _profile_module():
+    path = ROOT / "validation" / "hydrostatic_3d" / "profile.py"
+    spec = importlib.util.spec_from_file_location("hydrostatic_3d_profile", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
