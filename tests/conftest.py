@@ -41,3 +41,11 @@ def run_python(args, ranks=1, timeout=300, cwd=None):
 def error_lines(stderr):
     """The lines parmps itself wrote for an error (mpirun may add its own notices)."""
     return [line for line in stderr.splitlines() if line.startswith("parmps: error:")]
+
+
+def pytest_collection_modifyitems(config, items):
+    """The files with slow tests first, each file's tests kept together and in order: under
+    scripts/test's two test processes a file goes to one process whole, and a long file
+    handed out last would leave the other process idle while it runs."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)

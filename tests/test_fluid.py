@@ -66,6 +66,7 @@ def test_hydrostatic_pressure_against_the_weight_above(hydrostatic_run):
     assert analysis.escaped(out / "result.h5", *inside) == 0
 
 
+@pytest.mark.slow
 def test_hydrostatic_pressure_at_five_millimetres_meets_the_targets(tmp_path):
     """The still tank at l0 = 5 mm (6.4k particles, about 25 s): the bottom row's mean within
     0.5 % of rho g H, the RMS within 1 %, the bottom row's noise within 3 %, the column's height

@@ -66,6 +66,7 @@ def test_dam_break_after_50_steps_matches_one_rank(one_rank_dam_break, tmp_path,
 
 
 @pytest.mark.mpi
+@pytest.mark.slow
 def test_hydrostatic_pressure_on_two_ranks(tmp_path):
     # The still tank is chaotic: round-off differences between rank counts grow tenfold
     # every ~100 steps and the runs part ways after ~700 steps, so this checks the physics,
