@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import parmps
-from conftest import CASES, error_lines, run_parmps
+from conftest import error_lines, run_parmps
 from parmps import config, schema, validation
 from parmps.core.geometry import nearest_on_surface, surface_distance, winding_number
 from parmps.errors import CaseError
