@@ -6,7 +6,7 @@ height where a field of slope rho g through it is zero, z + P/(rho g), in l0.
 
 Prints that height by layer (1 l0 bins of the time-averaged height) for the fluid away from
 the side walls, the fluid beside them and the side walls' first layer, and the fraction of the
-fluid taken for free surface (n* < beta n0) near the top. A pressure exactly hydrostatic and
+fluid taken for free surface (n* < beta n0, the run's own test) near the top. A pressure exactly hydrostatic and
 zero where the water ends reads the water's depth in every row (docs/validation/
 hydrostatic_3d.md). Works for the 2D tank too (y up).
 """
@@ -21,33 +21,27 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
 
-def _by_id(frame, key):
-    return frame[key][np.argsort(frame["id"])]
-
-
 def profile(path, settle_time):
     """(rows of (group, height bin, count, zero height), surface rows of (height bin,
     fraction flagged), the water's depth), heights in l0 above the water's floor."""
-    from parmps.core import lattice
     from parmps.core.particles import FLUID, WALL
+    from parmps.fluid.constants import MPSConstants
     from parmps.io.frames import read_frames
     from parmps.tools.analysis import fluid_extent, gravity, result_case
 
+    # The case as run, its defaults filled in: the surface test the run itself made.
     case = result_case(path)
     spacing = case["particles"]["spacing"]
     lower, upper = fluid_extent(case)
     g, density = gravity(case), case["fluid"]["density"]
-    mps = case.get("mps", {})
-    beta = mps.get("surface_threshold", 0.97)
-    dimension = len(lower)
-    n0, _ = lattice.reference_values(spacing, mps.get("re_number_density", 2.3) * spacing,
-                                     dimension)
+    surface_density = case["mps"]["surface_threshold"] * MPSConstants.from_case(case).n0
+    # Frames come sorted by id, so particle k is the same particle in every frame.
     frames = [f for f in read_frames(path) if f["time"] >= settle_time]
     if not frames:
         raise SystemExit(f"{path}: no frame after t = {settle_time} s")
-    kind = _by_id(frames[0], "kind")
-    position = np.mean([_by_id(f, "position") for f in frames], axis=0)
-    pressure = np.mean([_by_id(f, "pressure") for f in frames], axis=0)
+    kind = frames[0]["kind"]
+    position = np.mean([f["position"] for f in frames], axis=0)
+    pressure = np.mean([f["pressure"] for f in frames], axis=0)
     height = (position[:, -1] - lower[-1]) / spacing
     zero = height + pressure / (density * g * spacing)
     horizontal = position[:, :-1]
@@ -65,17 +59,16 @@ def profile(path, settle_time):
             if np.any(here):
                 rows.append((name, bottom, int(np.count_nonzero(here)),
                              float(zero[here].mean())))
-    flagged = []
-    for bottom in np.arange(depth - 3.0, depth + 1.0, 0.5):
-        counts = [0, 0]
-        for frame in frames:
-            fluid = frame["kind"] == FLUID
-            z = (frame["position"][fluid, -1] - lower[-1]) / spacing
-            here = (z >= bottom) & (z < bottom + 0.5)
-            counts[0] += int(np.count_nonzero(here))
-            counts[1] += int(np.count_nonzero(here & (frame["number_density"][fluid] < beta * n0)))
-        if counts[0]:
-            flagged.append((bottom, counts[1] / counts[0]))
+    # Half-l0 bins of the instantaneous height near the top, over every frame.
+    edges = np.arange(depth - 3.0, depth + 1.01, 0.5)
+    counted, surface = np.zeros(len(edges) - 1), np.zeros(len(edges) - 1)
+    for frame in frames:
+        fluid = frame["kind"] == FLUID
+        z = (frame["position"][fluid, -1] - lower[-1]) / spacing
+        counted += np.histogram(z, edges)[0]
+        surface += np.histogram(z[frame["number_density"][fluid] < surface_density], edges)[0]
+    flagged = [(bottom, taken / total)
+               for bottom, total, taken in zip(edges[:-1], counted, surface) if total]
     return rows, flagged, depth
 
 
