@@ -84,6 +84,35 @@ def test_hydrostatic_pressure_at_five_millimetres_meets_the_targets(tmp_path):
     assert abs(measured["height_drift"]) < tolerance["height_drift"], measured["height_drift"]
 
 
+def test_dry_walls_hold_no_pressure_and_wet_walls_the_waters(hydrostatic_run):
+    """The tank's walls more than two search radii above the water are left out of the step
+    (P = 0, their number density not computed); the walls within one search radius of the
+    water, and those within one of them, take part, and beside the water they carry its
+    pressure. The still tank's last frame; the margins of half a spacing cover the last
+    step's motion, a small fraction of it."""
+    from scipy.spatial import cKDTree
+
+    from parmps.core.particles import FLUID, WALL
+    from parmps.fluid.constants import MPSConstants
+    out, _ = hydrostatic_run
+    constants = MPSConstants.from_case(HYDROSTATIC.case())
+    frame = read_frames(out / "result.h5")[-1]
+    fluid = frame["kind"] == FLUID
+    wall = frame["kind"] == WALL
+    distance, _ = cKDTree(frame["position"][fluid]).query(frame["position"][wall])
+    margin = 0.5 * constants.spacing
+    dry = distance > 2 * constants.search_radius + margin
+    taking_part = distance < 2 * constants.search_radius - margin
+    # The walls' top rows, 10 l0 above the water; two layers on each side.
+    assert dry.sum() >= 8 and taking_part.sum() > 100
+    assert np.all(frame["pressure"][wall][dry] == 0.0)
+    assert np.all(frame["number_density"][wall][dry] == 0.0)
+    assert np.all(frame["number_density"][wall][taking_part] > 0.5 * constants.n0)
+    # Below the surface's roughness, the walls beside the water read its pressure.
+    deep = (distance < constants.re_laplacian) & (frame["position"][wall][:, 1] < 0.15)
+    assert deep.sum() > 50 and np.all(frame["pressure"][wall][deep] > 0.0)
+
+
 def test_output_layout_and_xdmf(hydrostatic_run):
     out, result = hydrostatic_run
     assert "output: " in result.stderr

@@ -5,7 +5,7 @@ import pytest
 
 from parmps.core import kernels, operators
 from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list, rows_of
+from parmps.core.neighbours import pair_list, rows_near, rows_of
 
 SPACING = 0.01
 
@@ -477,3 +477,39 @@ def test_pair_list_is_the_same_whatever_room_it_is_given(scene, expected_pairs):
                                      expected_pairs=expected_pairs)
     assert np.array_equal(got_indptr, indptr)
     assert np.array_equal(got_cols, cols)
+
+
+@pytest.mark.parametrize("expected_pairs", [0, 10 ** 6])
+def test_rows_kept_only_near_a_marked_particle(scene, expected_pairs):
+    """``only_near``/``near`` (the fluid step's dry walls): a flagged row keeps its list,
+    unchanged, when it holds a ``near`` particle and gets an empty one otherwise; the
+    other rows are as without the flags, whether the search fits its room or not."""
+    position, _, _, _, n, indptr, cols, _ = scene
+    # A few 'water' particles in one corner: most flagged rows have none within reach.
+    near = np.all(position < 4 * SPACING, axis=1)
+    only_near = np.arange(n) % 3 != 0
+    got_indptr, got_cols = pair_list(position, 3.7 * SPACING, n_rows=n,
+                                     expected_pairs=expected_pairs, only_near=only_near,
+                                     near=near)
+    kept = 0
+    for i in range(n):
+        full = cols[indptr[i]:indptr[i + 1]]
+        expected = full if not only_near[i] or near[full].any() else full[:0]
+        np.testing.assert_array_equal(got_cols[got_indptr[i]:got_indptr[i + 1]], expected)
+        kept += only_near[i] and len(expected) > 0
+    # Both outcomes occur: some flagged rows kept, most emptied.
+    assert 0 < kept < np.count_nonzero(only_near) // 2
+
+
+def test_rows_near_marks_the_rows_with_a_marked_particle_within_the_radius(scene):
+    """``rows_near`` (the fluid step's wet walls): a row is marked exactly when its pair list
+    holds a ``near`` particle; rows not asked about are not marked."""
+    position, _, _, _, n, indptr, cols, _ = scene
+    near = np.all(position < 4 * SPACING, axis=1)
+    rows = np.arange(n) % 3 != 0
+    got = rows_near(position, 3.7 * SPACING, rows, near)
+    expected = np.array([rows[i] and near[cols[indptr[i]:indptr[i + 1]]].any()
+                         for i in range(n)])
+    np.testing.assert_array_equal(got, expected)
+    assert 0 < expected.sum() < rows.sum() // 2
+    assert not rows_near(position, 3.7 * SPACING, rows, np.zeros(len(position), bool)).any()

@@ -31,8 +31,31 @@ def _cell_coordinates(position, origin, cell_size):
 
 
 @numba.njit(cache=True, inline="always")
+def _any_near_in_block(lo, hi, at, stride, cell_start, near_before, d):
+    """Whether the cells [lo, hi) hold a particle counted in ``near_before`` (the number of
+    such particles before each place of the cell order)."""
+    for k in range(d):
+        at[k] = lo[k]
+    while True:
+        base = 0
+        for k in range(1, d):
+            base += at[k] * stride[k]
+        if near_before[cell_start[base + hi[0]]] > near_before[cell_start[base + lo[0]]]:
+            return True
+        k = 1
+        while k < d:
+            at[k] += 1
+            if at[k] < hi[k]:
+                break
+            at[k] = lo[k]
+            k += 1
+        if k == d:
+            return False
+
+
+@numba.njit(cache=True, inline="always")
 def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-              indices, rows, reach, d):
+              indices, rows, reach, only_near, near, near_before, d):
     """Pairs of rows [0, n_rows) within ``radius``, over the (2 reach + 1)^d cells around
     each row (cells at least radius/reach wide).
 
@@ -44,6 +67,11 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
     cells that differ in the first coordinate only are consecutive and their
     particles one contiguous run of ``order``: the loop walks the 3^(d-1) such
     runs in ascending key (in 2D: rows of cells by y, cells by x within a row).
+
+    A row flagged in ``only_near`` keeps its pairs only when one of them is a
+    particle flagged in ``near``, and gets an empty list otherwise; when its
+    cells hold no such particle at all (``near_before``: how many come before
+    each place of ``order``), it is not searched.
     """
     radius2 = radius * radius
     lo = np.empty(d, np.int64)
@@ -58,6 +86,13 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
         for k in range(d):
             lo[k] = max(cell[i, k] - reach, 0)
             hi[k] = min(cell[i, k] + reach + 1, cells[k])
+        found = only_near.shape[0] == 0 or not only_near[i]
+        if not found and not _any_near_in_block(lo, hi, at, stride, cell_start, near_before,
+                                                d):
+            indptr[i + 1] = total
+            continue
+        start = total
+        for k in range(d):
             at[k] = lo[k]
         while True:
             base = 0
@@ -75,6 +110,8 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
                     if total < room:
                         indices[total] = j
                     total += 1
+                    if not found and near[j]:
+                        found = True
             # The next run of cells: count up the coordinates 1 .. d-1 like an odometer.
             k = 1
             while k < d:
@@ -85,25 +122,118 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
                 k += 1
             if k == d:
                 break
+        if not found:
+            total = start
         indptr[i + 1] = total
     return total
 
 
 @numba.njit(cache=True)
 def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr, indices,
-            rows, reach):
+            rows, reach, only_near, near, near_before):
     # d as a literal, so the component loops unroll (see parmps.core.kernels).
     if position.shape[1] == 2:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         indptr, indices, rows, reach, 2)
+                         indptr, indices, rows, reach, only_near, near, near_before, 2)
     if position.shape[1] == 3:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                         indptr, indices, rows, reach, 3)
+                         indptr, indices, rows, reach, only_near, near, near_before, 3)
     return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
-                     indptr, indices, rows, reach, position.shape[1])
+                     indptr, indices, rows, reach, only_near, near, near_before,
+                     position.shape[1])
 
 
-def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
+def _grid(position, radius):
+    """The cells over ``position``: origin, cell size, reach (cells per radius), cells per
+    axis and strides. Cells 1/CELLS_PER_RADIUS of the radius wide (a hair wider, so that
+    ``reach`` of them span the radius despite rounding): the (2 reach + 1)^d cells around a
+    particle hold every neighbour and little else. Larger when the particles are sparse,
+    so the cell table stays O(n) in memory; ``reach`` then falls to 1."""
+    origin = position.min(axis=0) - 1e-12
+    extent = position.max(axis=0) - origin
+    cell_size = radius / CELLS_PER_RADIUS * (1.0 + 1e-12)
+    while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * len(position) + 4096:
+        cell_size *= 1.5
+    reach = max(1, math.ceil(radius / cell_size))
+    cells = np.array([int(e / cell_size) + 1 for e in extent], np.int64)
+    stride = np.concatenate([[1], np.cumprod(cells[:-1])]).astype(np.int64)
+    return origin, cell_size, reach, cells, stride
+
+
+def _cell_order(cell, cells, stride):
+    """The particles in cell order, and where each cell's run of them starts."""
+    key = cell @ stride
+    order = np.argsort(key, kind="stable")
+    return order, np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
+
+
+@numba.njit(cache=True)
+def _rows_near(position, row_index, row_cell, members, cell_start, cells, stride, reach,
+               radius, found):
+    """found[i] for each row i = row_index[r] (in cell row_cell[r]): whether one of
+    ``members`` (in cell order, runs from ``cell_start``) other than i lies within
+    ``radius``. Stops at the first."""
+    d = position.shape[1]
+    radius2 = radius * radius
+    lo = np.empty(d, np.int64)
+    hi = np.empty(d, np.int64)
+    at = np.empty(d, np.int64)
+    for r in range(row_index.shape[0]):
+        i = row_index[r]
+        for k in range(d):
+            lo[k] = max(row_cell[r, k] - reach, 0)
+            hi[k] = min(row_cell[r, k] + reach + 1, cells[k])
+            at[k] = lo[k]
+        done = False
+        while not done:
+            base = 0
+            for k in range(1, d):
+                base += at[k] * stride[k]
+            for s in range(cell_start[base + lo[0]], cell_start[base + hi[0]]):
+                j = members[s]
+                if j == i:
+                    continue
+                r2 = 0.0
+                for k in range(d):
+                    delta = position[j, k] - position[i, k]
+                    r2 += delta * delta
+                if r2 < radius2:
+                    found[i] = True
+                    done = True
+                    break
+            k = 1
+            while k < d and not done:
+                at[k] += 1
+                if at[k] < hi[k]:
+                    break
+                at[k] = lo[k]
+                k += 1
+            if k == d:
+                done = True
+
+
+def rows_near(position, radius, rows, near):
+    """Which of the rows flagged in ``rows`` (a mask over the first ``len(rows)``
+    particles) have a particle flagged in ``near`` (a mask over all of them) within
+    ``radius``: a boolean mask like ``rows``. Searches the cells of the ``near``
+    particles only, and stops at the first found."""
+    position = np.ascontiguousarray(position, dtype=np.float64)
+    rows = np.asarray(rows, np.bool_)
+    found = np.zeros(len(rows), np.bool_)
+    candidates = np.flatnonzero(np.asarray(near, np.bool_))
+    row_index = np.flatnonzero(rows)
+    if len(candidates) == 0 or len(row_index) == 0:
+        return found
+    origin, cell_size, reach, cells, stride = _grid(position, radius)
+    order, cell_start = _cell_order(_cell_coordinates(position[candidates], origin, cell_size),
+                                    cells, stride)
+    _rows_near(position, row_index, _cell_coordinates(position[row_index], origin, cell_size),
+               candidates[order], cell_start, cells, stride, reach, radius, found)
+    return found
+
+
+def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0, only_near=None,
+              near=None):
     """CSR neighbour lists (indptr, indices) of rows [0, n_rows) against every particle.
 
     ``position`` is (N, d) for any d >= 1; the cells are d-dimensional. ``rows``:
@@ -112,36 +242,35 @@ def pair_list(position, radius, n_rows=None, rows=None, expected_pairs=0):
     ``expected_pairs``: room to fill in one pass (e.g. a little more than the last
     step's count); the search runs a second time only when the pairs overflow it,
     and the result is the same either way.
+    ``only_near`` (mask of rows) and ``near`` (mask of every particle): the rows
+    flagged in ``only_near`` keep their list only when a particle of ``near`` is in
+    it, and get an empty one otherwise (walls away from any water, say).
     """
+    if (only_near is None) != (near is None):
+        raise ValueError("pair_list: only_near and near go together")
+    if only_near is None:
+        only_near = near = np.zeros(0, np.bool_)
+    only_near = np.asarray(only_near, np.bool_)
+    near = np.asarray(near, np.bool_)
     position = np.ascontiguousarray(position, dtype=np.float64)
     n = len(position)
     n_rows = n if n_rows is None else int(n_rows)
     indptr = np.zeros(n_rows + 1, np.int64)
     if n == 0 or n_rows == 0:
         return indptr, np.empty(0, np.int64)
-    origin = position.min(axis=0) - 1e-12
-    extent = position.max(axis=0) - origin
-    # Cells 1/CELLS_PER_RADIUS of the radius wide (a hair wider, so that ``reach`` of them
-    # span the radius despite rounding): the (2 reach + 1)^d cells around a particle hold
-    # every neighbour and little else. Larger when the particles are sparse, so the cell
-    # table stays O(n) in memory; ``reach`` then falls to 1.
-    cell_size = radius / CELLS_PER_RADIUS * (1.0 + 1e-12)
-    while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * n + 4096:
-        cell_size *= 1.5
-    reach = max(1, math.ceil(radius / cell_size))
-    cells = np.array([int(e / cell_size) + 1 for e in extent], np.int64)
-    stride = np.concatenate([[1], np.cumprod(cells[:-1])]).astype(np.int64)
+    origin, cell_size, reach, cells, stride = _grid(position, radius)
     cell = _cell_coordinates(position, origin, cell_size)
-    key = cell @ stride
-    order = np.argsort(key, kind="stable")
-    cell_start = np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
+    order, cell_start = _cell_order(cell, cells, stride)
+    near_before = np.zeros(n + 1 if len(only_near) else 1, np.int64)
+    if len(only_near):
+        np.cumsum(near[order], out=near_before[1:])
     indices = np.empty(max(int(expected_pairs), 0), np.int64)
     total = _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-                    indices, rows, reach)
+                    indices, rows, reach, only_near, near, near_before)
     if total > len(indices):
         indices = np.empty(total, np.int64)
         _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr,
-                indices, rows, reach)
+                indices, rows, reach, only_near, near, near_before)
     return indptr, indices[:total]
 
 

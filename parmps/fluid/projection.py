@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from parmps.core import kernels
-from parmps.core.neighbours import pair_list
+from parmps.core.neighbours import pair_list, rows_near
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
@@ -146,9 +146,12 @@ class FluidSolver:
 
         timers.start("neighbours")
         # Dummies need no sums of their own: they carry no pressure and do not move; they
-        # count only as the neighbours of others.
+        # count only as the neighbours of others. Nor do the walls away from the water.
+        wetting = self._wetting(position, kind, n)
         indptr, cols = pair_list(position, c.search_radius, n_rows=n, rows=kind[:n] != DUMMY,
-                                 expected_pairs=self.expected_pairs)
+                                 expected_pairs=self.expected_pairs,
+                                 only_near=kind[:n] == WALL, near=wetting)
+        dry = (kind[:n] == WALL) & (indptr[1:] == indptr[:-1])
         # Room for the next step's search in one pass: the count changes by well under
         # a few percent from one step to the next.
         self.expected_pairs = int(1.05 * len(cols)) + 64
@@ -189,6 +192,8 @@ class FluidSolver:
         has_pressure = kind != DUMMY
         unknown, surface_unknown = self.free_surface.unknowns(
             has_pressure[:n], surface, (kind[:n] == FLUID) | (kind[:n] == WALL))
+        unknown &= ~dry
+        surface_unknown &= ~dry
         if dirichlet is not None:
             # Open boundaries: a closed channel otherwise has no pressure level.
             unknown &= ~dirichlet
@@ -254,6 +259,26 @@ class FluidSolver:
         timers.stop()
         return {"ksp_iterations": iterations, "ksp_residual": residual,
                 "n_surface": int(np.count_nonzero(surface & moving))}
+
+    def _wetting(self, position, kind, n):
+        """The local particles that make the walls within the search radius of them take
+        part in the step (collective: one halo refresh): those that carry the water's
+        pressure (fluid, buffers, bodies' nodes), and the walls within the search radius
+        of one of those (wet walls).
+
+        A wall beyond, two search radii from the water, is dry: no row that moves reads it,
+        and it is held at P = 0, which is what the solve gave such walls when they were
+        unknowns (their sources' negative pressures, clamped; docs/performance.md). The
+        ring beside the wet walls keeps the pressure the solve gives it: with one radius
+        only, the walls there were pulled to zero, and the SPHERIC box's sensor P3 read
+        the impact 6 ms later on 1 and 2 ranks."""
+        bearing = (kind != WALL) & (kind != DUMMY)
+        wet = np.zeros(len(kind), np.int8)
+        wet[:n] = rows_near(position, self.constants.search_radius, kind[:n] == WALL, bearing)
+        self.timers.start("halo")
+        self.decomposition.refresh([wet])
+        self.timers.start("neighbours")
+        return bearing | wet.view(bool)
 
     def _shift(self, particles, indptr, cols, position, velocity, surface, dt):
         """Move the owned fluid particles by the shifting scheme's shift (in place), from
