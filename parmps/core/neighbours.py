@@ -31,6 +31,20 @@ def _cell_coordinates(position, origin, cell_size):
 
 
 @numba.njit(cache=True, inline="always")
+def _next_run(at, lo, hi, d):
+    """Move ``at`` to the next run of cells in [lo, hi): count up the coordinates 1 .. d-1
+    like an odometer (coordinate 0 spans the run). False once past the last run."""
+    k = 1
+    while k < d:
+        at[k] += 1
+        if at[k] < hi[k]:
+            return True
+        at[k] = lo[k]
+        k += 1
+    return False
+
+
+@numba.njit(cache=True, inline="always")
 def _any_near_in_block(lo, hi, at, stride, cell_start, near_before, d):
     """Whether the cells [lo, hi) hold a particle counted in ``near_before`` (the number of
     such particles before each place of the cell order)."""
@@ -42,14 +56,7 @@ def _any_near_in_block(lo, hi, at, stride, cell_start, near_before, d):
             base += at[k] * stride[k]
         if near_before[cell_start[base + hi[0]]] > near_before[cell_start[base + lo[0]]]:
             return True
-        k = 1
-        while k < d:
-            at[k] += 1
-            if at[k] < hi[k]:
-                break
-            at[k] = lo[k]
-            k += 1
-        if k == d:
+        if not _next_run(at, lo, hi, d):
             return False
 
 
@@ -112,15 +119,7 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
                     total += 1
                     if not found and near[j]:
                         found = True
-            # The next run of cells: count up the coordinates 1 .. d-1 like an odometer.
-            k = 1
-            while k < d:
-                at[k] += 1
-                if at[k] < hi[k]:
-                    break
-                at[k] = lo[k]
-                k += 1
-            if k == d:
+            if not _next_run(at, lo, hi, d):
                 break
         if not found:
             total = start
@@ -184,8 +183,7 @@ def _rows_near(position, row_index, row_cell, members, cell_start, cells, stride
             lo[k] = max(row_cell[r, k] - reach, 0)
             hi[k] = min(row_cell[r, k] + reach + 1, cells[k])
             at[k] = lo[k]
-        done = False
-        while not done:
+        while not found[i]:
             base = 0
             for k in range(1, d):
                 base += at[k] * stride[k]
@@ -199,17 +197,9 @@ def _rows_near(position, row_index, row_cell, members, cell_start, cells, stride
                     r2 += delta * delta
                 if r2 < radius2:
                     found[i] = True
-                    done = True
                     break
-            k = 1
-            while k < d and not done:
-                at[k] += 1
-                if at[k] < hi[k]:
-                    break
-                at[k] = lo[k]
-                k += 1
-            if k == d:
-                done = True
+            if not _next_run(at, lo, hi, d):
+                break
 
 
 def rows_near(position, radius, rows, near):
