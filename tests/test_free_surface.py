@@ -106,6 +106,37 @@ def test_the_corrected_gradient_is_exact_on_the_surface_below_the_limit_and_half
                                    atol=1e-12)
 
 
+def test_a_row_beside_a_line_of_surface_particles_takes_the_missing_side_across_it():
+    """Surface particles along one line (a lattice's edge in 3D, at a corner of the water)
+    spread alike in every direction across it, so the direction of least spread is not
+    one direction: the normal is the missing neighbours' direction projected across the
+    line, whatever order the sums run in (which is the ranks' cut: the Jacobi rotations
+    had returned directions 113 degrees apart on 1 and 2 ranks)."""
+    row = [[0.0, 0.0, 0.0]]
+    line = [[x, 0.0, 1.0] for x in (-2.0, -1.0, 0.0, 1.0, 2.0)]
+    missing = np.array([0.3, 0.4, 0.8])
+    expected = np.array([0.0, 0.4, 0.8]) / np.hypot(0.4, 0.8)
+    for order in ([0, 1, 2, 3, 4], [4, 2, 0, 3, 1], [1, 3, 4, 0, 2]):
+        position = np.array(row + [line[k] for k in order])
+        n = len(position)
+        indptr, cols = pair_list(position, RE_LAPLACIAN + 0.01, n_rows=n)
+        on_surface = np.array([False] + [True] * 5)
+        raw = np.zeros((n, 3))
+        raw[0] = missing / np.linalg.norm(missing)
+        normal = kernels.surface_fitted_normals(indptr, cols, position, raw, on_surface,
+                                                RE_LAPLACIAN, 1)
+        np.testing.assert_allclose(normal[0], expected, atol=1e-12)
+    # Off the line (the row below a plane of them), one direction of least spread: the plane's.
+    plane = np.array([[0.0, 0.0, 0.0]] + [[x, y, 1.0] for x in (-1.0, 0.0, 1.0)
+                                          for y in (-1.0, 0.0, 1.0)])
+    indptr, cols = pair_list(plane, RE_LAPLACIAN + 0.01, n_rows=len(plane))
+    raw = np.zeros((len(plane), 3))
+    raw[0] = missing / np.linalg.norm(missing)
+    normal = kernels.surface_fitted_normals(indptr, cols, plane, raw,
+                                            np.arange(len(plane)) > 0, RE_LAPLACIAN, 1)
+    np.testing.assert_allclose(normal[0], [0.0, 0.0, 1.0], atol=1e-12)
+
+
 def test_a_surface_row_without_a_direction_gets_the_undirected_diagonal():
     """One particle alone, and the middle of a one-particle-thick sheet: their missing
     neighbours have no direction, so the ghosts' term is the given fallback, never 0 (a

@@ -832,22 +832,70 @@ def surface_normals(indptr, cols, position, is_surface, radius, n_rows):
     return _surface_normals(indptr, cols, position, is_surface, radius, n_rows, 3)
 
 
+# Eigenvalues of the surface particles' spread within this fraction of the largest of the
+# smallest one count as tied: surface particles along one line (a lattice's edge, a jet)
+# spread alike in every direction across it, and which of those the rotations return
+# depends on the order of the sums, i.e. on how the ranks cut the domain (a side wall's
+# row at the 3D dam break's corner took normals 113 degrees apart on 1 and 2 ranks).
+_SPREAD_TIE = 1e-6
+
+
 @numba.njit(cache=True)
-def _smallest_eigenvector(a, work, vectors, out):
-    """The unit eigenvector of the smallest eigenvalue of the small symmetric ``a``, into
-    ``out``, by :func:`_jacobi_diagonalise` (``work`` and ``vectors``: d×d scratch)."""
-    d = a.shape[0]
+def _least_spread_normal(spread, raw, i, work, vectors, out):
+    """The unit direction of least ``spread`` (d×d, symmetric), turned to the side of
+    ``raw[i]``, into ``out``. Where eigenvalues tie with the smallest (within
+    ``_SPREAD_TIE`` of the largest, weighted down linearly across that band) the normal is
+    ``raw[i]`` projected on their eigenvectors, so it does not depend on round-off
+    (``work`` and ``vectors``: d×d scratch)."""
+    d = spread.shape[0]
     for k in range(d):
         for m in range(d):
-            work[k, m] = a[k, m]
+            work[k, m] = spread[k, m]
             vectors[k, m] = 1.0 if k == m else 0.0
     _jacobi_diagonalise(work, vectors, True)
     smallest = 0
+    largest = 0
     for k in range(1, d):
         if work[k, k] < work[smallest, smallest]:
             smallest = k
+        if work[k, k] > work[largest, largest]:
+            largest = k
+    band = _SPREAD_TIE * work[largest, largest]
+    tied = False
+    raw_length = 0.0
+    for m in range(d):
+        out[m] = 0.0
+        raw_length += raw[i, m] * raw[i, m]
     for k in range(d):
-        out[k] = vectors[k, smallest]
+        gap = work[k, k] - work[smallest, smallest]
+        if k == smallest:
+            share = 1.0
+        elif gap < band:
+            share = 1.0 - gap / band
+            tied = True
+        else:
+            continue
+        along = 0.0
+        for m in range(d):
+            along += vectors[m, k] * raw[i, m]
+        for m in range(d):
+            out[m] += share * along * vectors[m, k]
+    if tied:
+        length = 0.0
+        for m in range(d):
+            length += out[m] * out[m]
+        if length > 1e-24 * raw_length:
+            length = np.sqrt(length)
+            for m in range(d):
+                out[m] /= length
+            return
+    # One direction of least spread: outwards, on the side of the missing neighbours.
+    along = 0.0
+    for m in range(d):
+        along += vectors[m, smallest] * raw[i, m]
+    sign = 1.0 if along >= 0.0 else -1.0
+    for m in range(d):
+        out[m] = sign * vectors[m, smallest]
 
 
 @numba.njit(cache=True, inline="always")
@@ -894,14 +942,9 @@ def _surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_r
             for k in range(d):
                 for m in range(d):
                     spread[k, m] = spread[k, m] / total - centre[k] * centre[m]
-            _smallest_eigenvector(spread, work, vectors, direction)
-            along = 0.0
+            _least_spread_normal(spread, raw, i, work, vectors, direction)
             for k in range(d):
-                along += direction[k] * raw[i, k]
-            # Outwards: on the side of the missing neighbours.
-            sign = 1.0 if along >= 0.0 else -1.0
-            for k in range(d):
-                normal[i, k] = sign * direction[k]
+                normal[i, k] = direction[k]
         else:
             for k in range(d):
                 normal[i, k] = raw[i, k] / length
@@ -914,8 +957,9 @@ def surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_ro
     :func:`surface_normals`, is set; 0 elsewhere): the direction in which the
     free-surface particles ``on_surface`` (every local particle) within the radius,
     the row itself included, spread least (weighted by w_ij, the row by 1), turned
-    to the side ``raw`` points to. With fewer than d + 1 such particles, ``raw``
-    itself. The missing neighbours' direction alone would lean away from a wall
+    to the side ``raw`` points to; where several directions spread least alike (the
+    particles along a line), ``raw`` projected on them. With fewer than d + 1 such
+    particles, ``raw`` itself. The missing neighbours' direction alone would lean away from a wall
     that rises above the water: there, only the air's side of the wall misses."""
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
