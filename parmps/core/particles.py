@@ -29,6 +29,9 @@ FIELDS = {
     "velocity": (np.float64, ("d",), 0.0),
     "pressure": (np.float64, (), 0.0),
     "number_density": (np.float64, (), 0.0),
+    # 1: a wall away from the water, which took no part in the last fluid step (no pair
+    # list, P = 0); the load balance weighs it as a dummy. Set by the fluid each step.
+    "dry": (np.int8, (), 0),
     # Solid bodies: index of the body (-1 for none) and of the node within it.
     "body": (np.int32, (), -1),
     "node": (np.int32, (), -1),

@@ -152,6 +152,7 @@ class FluidSolver:
                                  expected_pairs=self.expected_pairs,
                                  only_near=kind[:n] == WALL, near=wetting)
         dry = (kind[:n] == WALL) & (indptr[1:] == indptr[:-1])
+        particles.dry[:n] = dry
         # Room for the next step's search in one pass: the count changes by well under
         # a few percent from one step to the next.
         self.expected_pairs = int(1.05 * len(cols)) + 64
@@ -259,6 +260,19 @@ class FluidSolver:
         timers.stop()
         return {"ksp_iterations": iterations, "ksp_residual": residual,
                 "n_surface": int(np.count_nonzero(surface & moving))}
+
+    def mark_dry(self, particles):
+        """Flag the owned dry walls of ``particles`` (owned and current ghosts) as the step
+        would, before any step has run (collective): the load balance's first cut then
+        weighs them as it will from the first step on."""
+        self.timers.start("neighbours")
+        n = particles.n_owned
+        kind, position = particles.kind, particles.position
+        wall = kind[:n] == WALL
+        taking_part = rows_near(position, self.constants.search_radius, wall,
+                                self._wetting(position, kind, n))
+        particles.dry[:n] = wall & ~taking_part
+        self.timers.stop()
 
     def _wetting(self, position, kind, n):
         """The local particles that make the walls within the search radius of them take

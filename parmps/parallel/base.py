@@ -166,8 +166,11 @@ class Decomposition(abc.ABC):
         return counts
 
     def weights(self, particles):
-        """The load-balance weight of each owned particle (local)."""
-        return self.kind_weight[particles.kind[:particles.n_owned]]
+        """The load-balance weight of each owned particle (local): its kind's, and a dry
+        wall's a dummy's (it is in no sum either, bar its one-entry row of P = 0)."""
+        n = particles.n_owned
+        return np.where(particles.dry[:n] != 0, self.kind_weight[DUMMY],
+                        self.kind_weight[particles.kind[:n]])
 
     def set_extra_work(self, work):
         """Each rank's work beyond its particles (an array over the ranks, the same on every

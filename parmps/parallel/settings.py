@@ -27,7 +27,8 @@ SECTIONS = {
         # particle outside the solve and as much in it, a dummy next to nothing.
         "wall_weight": Key("float", 0.8, ge=0.0, le=1.0,
                            doc="load balance: a wall particle's work relative to a fluid "
-                               "particle's"),
+                               "particle's (a dry wall, away from the water, weighs as a "
+                               "dummy)"),
         "dummy_weight": Key("float", 0.1, ge=0.0, le=1.0,
                             doc="load balance: a dummy particle's work relative to a fluid "
                                 "particle's"),
