@@ -147,6 +147,22 @@ def test_every_registered_decomposition_implements_the_interface():
                 made.owner(np.zeros(5))  # x alone is not a position
 
 
+def test_a_dry_wall_weighs_as_a_dummy():
+    """The balance weighs each particle by its kind's work, and a dry wall (no water within
+    two search radii: no pair list, P = 0) as the dummy it then costs as."""
+    from mpi4py import MPI
+    from parmps.core.particles import DUMMY, FLUID, WALL, Particles
+    from parmps.parallel import decomposition_class
+    made = decomposition_class("slabs")(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0],
+                                                             wall_weight=0.7,
+                                                             dummy_weight=0.2))
+    kind = np.array([FLUID, WALL, WALL, DUMMY, DUMMY])
+    particles = Particles({"id": np.arange(5), "kind": kind, "position": np.zeros((5, 2)),
+                           "dry": np.array([0, 0, 1, 0, 1])})
+    np.testing.assert_allclose(made.weights(particles), [1.0, 0.7, 0.2, 0.2, 0.2])
+    np.testing.assert_allclose(made.loads(particles), [2.3])
+
+
 @pytest.mark.parametrize("ranks, lower, upper, expected", [
     (4, [0, 0], [30, 30], (2, 2)),        # square: the balanced grid
     (4, [0, 0], [120, 30], (4, 1)),       # a channel: Dims_create's 2 x 2 would cost more

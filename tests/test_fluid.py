@@ -111,6 +111,14 @@ def test_dry_walls_hold_no_pressure_and_wet_walls_the_waters(hydrostatic_run):
     # Below the surface's roughness, the walls beside the water read its pressure.
     deep = (distance < constants.re_laplacian) & (frame["position"][wall][:, 1] < 0.15)
     assert deep.sum() > 50 and np.all(frame["pressure"][wall][deep] > 0.0)
+    # The particles carry the last step's flag (the load balance weighs them by it).
+    from parmps.io.checkpoint import read_checkpoint
+    saved = read_checkpoint(out).particles
+    order = np.argsort(saved.id)
+    assert np.array_equal(saved.id[order], frame["id"])
+    flagged = saved.dry[order] == 1
+    assert np.array_equal(flagged, wall & (frame["number_density"] == 0.0))
+    assert np.all(flagged[wall][dry]) and not np.any(flagged[wall][taking_part])
 
 
 def test_output_layout_and_xdmf(hydrostatic_run):
