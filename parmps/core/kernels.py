@@ -275,6 +275,39 @@ def divergence_sum(indptr, cols, position, field, radius, n_rows):
     return _divergence_sum(indptr, cols, position, field, radius, n_rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _missing_pair_flux(indptr, cols, position, vector, missing, radius, inverse_cube, n_rows, d):
+    out = np.zeros(n_rows)
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not missing[j]:
+                continue
+            w = _laplacian_weight(pair_distance2(position, i, j, d), radius, inverse_cube)
+            if w > 0.0:
+                projected = 0.0
+                for k in range(d):
+                    projected += vector[k] * pair_component(position, i, j, k)
+                total += w * projected
+        out[i] = total
+    return out
+
+
+@numba.njit(cache=True)
+def missing_pair_flux(indptr, cols, position, vector, missing, radius, inverse_cube, n_rows):
+    """sum_j w_ij (a . r_ij) over the neighbours j flagged ``missing`` (0 < r < radius), w
+    the Laplacian's weight (:func:`_laplacian_weight`): what those pairs would add to the
+    Laplacian's sum of the linear field of gradient ``a`` (times the Laplacian's
+    coefficient), the pairs the pressure matrix leaves out (dummies carry no pressure)."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _missing_pair_flux(indptr, cols, position, vector, missing, radius,
+                                  inverse_cube, n_rows, 2)
+    return _missing_pair_flux(indptr, cols, position, vector, missing, radius, inverse_cube,
+                              n_rows, 3)
+
+
 # --- pressure gradient ------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

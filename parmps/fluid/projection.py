@@ -55,6 +55,9 @@ class PressureStep:
     any position in the step); ``near_indptr``/``near_cols`` its pairs within the
     number density's radius at ``position_star``, for the sums there.
     ``kind``: every local particle's kind (owned, then ghosts).
+    ``gravity``: the body force per unit mass the prediction added (``dt gravity`` is in
+    ``velocity_star`` of the moving particles); ``laplacian``: the Laplacian scheme the
+    matrix was assembled with.
     """
 
     dt: float
@@ -70,6 +73,8 @@ class PressureStep:
     near_indptr: np.ndarray
     near_cols: np.ndarray
     kind: np.ndarray = None
+    gravity: np.ndarray = None
+    laplacian: object = None
 
     def number_density_at(self, position, radius):
         """The number density of the owned rows with the particles at ``position``
@@ -226,7 +231,8 @@ class FluidSolver:
             dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
             velocity=velocity, position_star=position_star, velocity_star=velocity_star,
             number_density=number_density, unknown_index=pressure_index[with_source],
-            near_indptr=near_indptr, near_cols=near_cols, kind=kind))
+            near_indptr=near_indptr, near_cols=near_cols, kind=kind, gravity=self.gravity,
+            laplacian=self.laplacian))
 
         timers.start("solve")
         guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)

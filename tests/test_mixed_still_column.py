@@ -1,0 +1,89 @@
+"""The mixed source on a still column's lattice: the hydrostatic field solves the rows.
+
+One step of the solver on the still tank's initial lattice (cases/hydrostatic.toml and
+cases/hydrostatic_3d.toml, at rest), with a pressure solver that returns P = rho g (H - z),
+z the last axis, zero half a spacing above the
+top row and linear into the walls, instead of solving: A P - b is each row's residual,
+which the density term has to balance with a density error of gamma^-1 dt^2/rho times it.
+With the body force's share of u* taken as the flux of the Laplacian's dummy pairs
+(``[mps.mixed] body_force = "laplacian"``) the rows beside the floor read zero (the matrix's
+compressibility and a pair beyond the two dummy layers left); in the divergence with the
+walls at rest (``"divergence"``) the first fluid row reads -0.47 rho g/l0 and the second
+wall layer +0.70 (docs/design.md §1.4).
+"""
+
+import os
+
+import numpy as np
+import pytest
+
+from parmps import config, schema
+from parmps.core import scene
+from parmps.core.particles import DUMMY, FLUID, WALL
+from parmps.fluid.projection import FluidSolver
+
+CASES = os.path.join(os.path.dirname(__file__), os.pardir, "cases")
+
+
+class _Halo:
+    def refresh(self, arrays):
+        pass
+
+
+class _Comm:
+    rank = 0
+
+    def exscan(self, value):
+        return 0
+
+
+class _Hydrostatic:
+    """Returns the field it is given and keeps the system it was asked to solve."""
+
+    def __init__(self, pressure):
+        self.pressure = pressure
+
+    def solve(self, indptr, columns, values, rhs, guess, step_number, first_row):
+        self.system = (indptr, columns, values, rhs)
+        return self.pressure, 0, 0.0
+
+
+def _residual(name, body_force):
+    path = os.path.join(CASES, name)
+    with open(path) as handle:
+        raw = config.load_text(handle.read(), path)
+    config.apply_override(raw, 'mps.source="mixed"')
+    config.apply_override(raw, f'mps.mixed.body_force="{body_force}"')
+    case = schema.validate(raw)
+    particles, _, _ = scene.build(case)
+    kind, position = particles.kind, particles.position
+    spacing = case["particles"]["spacing"]
+    fluid = kind == FLUID
+    surface = position[fluid, -1].max() + 0.5 * spacing
+    floor = position[fluid, -1].min() - 0.5 * spacing
+    rows = np.flatnonzero(kind != DUMMY)
+    g, density = -case["physics"]["gravity"][-1], case["fluid"]["density"]
+    solver = _Hydrostatic(density * g * (surface - position[rows, -1]))
+    FluidSolver(case, _Comm(), _Halo(), solver).step(particles, 1e-3, 0)
+    indptr, columns, values, rhs = solver.system
+    applied = np.add.reduceat(values * solver.pressure[columns], indptr[:-1])
+    height = (position[rows, -1] - floor) / spacing
+    # Columns three spacings or more inside the side walls: the floor's rows alone.
+    low, high = position[fluid, :-1].min(axis=0), position[fluid, :-1].max(axis=0)
+    horizontal = position[rows, :-1]
+    middle = np.all((horizontal > low + 3 * spacing) & (horizontal < high - 3 * spacing), axis=1)
+    return (applied - rhs) / (density * g / spacing), kind[rows], height, middle
+
+
+@pytest.mark.parametrize("name", ["hydrostatic.toml", "hydrostatic_3d.toml"])
+@pytest.mark.parametrize("body_force", ["laplacian", "divergence"])
+def test_the_hydrostatic_field_solves_the_rows_beside_the_floor(name, body_force):
+    residual, kind, height, middle = _residual(name, body_force)
+    first_row = (kind == FLUID) & (height < 1.0) & middle
+    deep_wall = (kind == WALL) & (height > -2.0) & (height < -1.0) & middle
+    beside_floor = (height < 3.0) & (height > -2.0)
+    if body_force == "laplacian":
+        assert np.abs(residual[beside_floor]).max() < 0.015
+    else:
+        assert residual[first_row].mean() == pytest.approx(-0.47, abs=0.03)
+        assert residual[deep_wall].mean() == pytest.approx(0.70, abs=0.03)
