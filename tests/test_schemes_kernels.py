@@ -405,10 +405,16 @@ def _step(position, velocity, position_star, velocity_star, constants, dt=DT):
     near_indptr, near_cols = kernels.pairs_within(indptr, cols, position_star,
                                                   constants.re_number_density, n)
     inside = np.flatnonzero(interior(position, 4 * SPACING))
+    # Fluid only and no body force: the mixed source's body-force terms vanish here
+    # (tests/test_mixed_still_column.py checks them).
+    from parmps.core.particles import FLUID
+    from parmps.fluid.schemes.laplacian import StandardLaplacian
     return PressureStep(dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
                         velocity=velocity, position_star=position_star,
                         velocity_star=velocity_star, number_density=density_star,
-                        unknown_index=inside, near_indptr=near_indptr, near_cols=near_cols)
+                        unknown_index=inside, near_indptr=near_indptr, near_cols=near_cols,
+                        kind=np.full(n, FLUID), gravity=np.zeros(position.shape[1]),
+                        laplacian=StandardLaplacian({}, constants))
 
 
 def _moving_step(constants, velocity_seed, position_seed):

@@ -72,9 +72,9 @@ class PressureStep:
     unknown_index: np.ndarray
     near_indptr: np.ndarray
     near_cols: np.ndarray
-    kind: np.ndarray = None
-    gravity: np.ndarray = None
-    laplacian: object = None
+    kind: np.ndarray
+    gravity: np.ndarray
+    laplacian: object
 
     def number_density_at(self, position, radius):
         """The number density of the owned rows with the particles at ``position``

@@ -79,8 +79,7 @@ class MixedSource(MeasuredSource):
         c = self.constants
         index = step.unknown_index
         velocity = step.velocity_star
-        split = (self.body_force == "laplacian" and step.gravity is not None
-                 and step.laplacian is not None and step.kind is not None)
+        split = self.body_force == "laplacian"
         if split:
             # The body force's share of u* leaves the divergence: walls at rest beside
             # fluid falling at dt g would put its stop at the water's face (the first fluid
@@ -105,7 +104,7 @@ class MixedSource(MeasuredSource):
                 np.asarray(step.gravity, dtype=float), step.kind == DUMMY, c.re_laplacian,
                 laplacian.inverse_cube, step.n_owned)
             rhs += laplacian.coefficient * c.density * flux[index]
-        if self.beside_bodies == "density" and step.kind is not None:
+        if self.beside_bodies == "density":
             beside = self.beside_body(step)[index]
             if np.any(beside):
                 density = (self.body_relaxation * (c.density / step.dt ** 2)
