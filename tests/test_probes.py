@@ -2,7 +2,8 @@
 Lobovsky case's set-up, and the same values on 1, 2 and 3 ranks.
 
 - Sums over a full lattice normalise to 1; a Shepard average reproduces a linear
-  field at a lattice node; a point with too little fluid reads NaN.
+  field at a lattice node; a point with too little fluid reads NaN, a point beside a
+  wall once the water fills half of its support outside the wall.
 - Splitting the particles between ranks changes no sum (each rank adds its owned ones).
 - A level line reads a still layer's depth H within 2 % (its fill integrated) and its
   surface within l0/4 (the highest crossing), in 2D and 3D; over a jet passing above a
@@ -72,6 +73,38 @@ def test_a_point_with_too_little_fluid_reads_nan():
     # Far away: no fluid at all.
     empty = _sums(_point(1.0, 1.0, 2.0), position, kind, pressure)
     assert math.isnan(shepard_pressure(empty, full, 0.5)[0])
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_wall_sample_is_wet_once_half_its_open_support_is(dimension):
+    """A sensor on a wall just below the waterline: the sample, half a spacing from the
+    wall and a tenth of one below the water's top, has water filling a little over half of
+    its support outside the wall, but less than half of a full lattice's (the wall holds
+    the rest). It reads the water's
+    pressure; a spacing higher, above the waterline, it reads NaN."""
+    n = 12
+    axes = [np.arange(-3, n) + 0.5] + [np.arange(-n, n) + 0.5] * (dimension - 1)
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dimension)
+    surface = 0.3                  # the top row's centre is 0.5 below: the waterline at 0
+    wall = grid[:, 0] < 0.0        # the wall: x < 0; the water: x > 0 below the waterline
+    keep = wall | (grid[:, -1] < surface)
+    position = grid[keep] * SPACING
+    kind = np.where(wall[keep], WALL, FLUID).astype(np.int8)
+    pressure = np.where(kind == FLUID, 5.0, 0.0)
+    full = lattice_sum(2.0, dimension)
+
+    def sums_at(height):
+        point = np.zeros(dimension)
+        point[0], point[-1] = 0.5 * SPACING, height * SPACING
+        rows = SampleRows([point], [np.eye(dimension)[0]], [SPACING], [1], [2.0 * SPACING])
+        return kernel_sums(rows, position, kind, pressure, len(position), MPI.COMM_SELF)
+
+    below = sums_at(-0.1)
+    fluid, occupied = below[0, 0], below[0, 2]
+    # Measured against the whole support it would read dry; against its open part, wet.
+    assert fluid / full < 0.5 < fluid / (full - (occupied - fluid)) < 0.6
+    assert shepard_pressure(below, full, 0.5)[0] == pytest.approx(5.0, rel=1e-12)
+    assert math.isnan(shepard_pressure(sums_at(1.0), full, 0.5)[0])
 
 
 def test_splitting_the_particles_between_ranks_changes_no_sum():

@@ -156,9 +156,20 @@ def kernel_sums(rows, position, kind, pressure, n_owned, comm):
 
 
 def shepard_pressure(sums, full_sum, min_fill):
-    """Σ w p / Σ w over the fluid; NaN where Σ w < min_fill × the full lattice's sum."""
+    """Σ w p / Σ w over the fluid where the sample is wet, NaN where it is dry.
+
+    Wet: the fluid fills at least ``min_fill`` of the part of the support outside walls
+    and dummies (``full_sum`` less their weights), the share the level probe's surface
+    is drawn at (0.5). A sample beside a wall is then wet once the water around it is,
+    as a wall sensor is: measured against the whole support, a sample half a spacing
+    from a wall needed about 0.63 of its open part filled, at a box's edge or a floor
+    corner 0.7 or more, so a thin sheet running up or over a wall read dry. A support
+    less than IN_WALL_SHARE outside walls (a point inside one) is measured against that
+    share of ``full_sum``."""
     weight = sums[:, FLUID_WEIGHT]
-    enough = weight >= min_fill * full_sum
+    open_part = full_sum - (sums[:, OCCUPIED_WEIGHT] - weight)
+    enough = (weight > 0.0) & (weight >= min_fill * np.maximum(open_part,
+                                                               IN_WALL_SHARE * full_sum))
     out = np.full(len(sums), np.nan)
     out[enough] = sums[enough, FLUID_PRESSURE] / weight[enough]
     return out

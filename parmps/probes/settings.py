@@ -56,8 +56,9 @@ SECTIONS = {
         "radius": Key("float", 2.0, ge=1.0, le=4.0,
                       doc="the sampling kernel's radius, in spacings l0"),
         "min_fill": Key("float", 0.5, gt=0.0, le=1.0,
-                        doc="pressure: a point whose fluid weights sum to less than this "
-                            "fraction of a full lattice's reads NaN (DualSPHysics's kclimit)"),
+                        doc="pressure: a point whose fluid fills less than this share of the "
+                            "part of its support outside walls reads NaN (dry; 0.5: the "
+                            "free surface, where the level probe draws it)"),
     }, many=True, doc="a probe sampled during the run (docs/design.md §5.1)"),
 }
 
