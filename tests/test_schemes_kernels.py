@@ -589,12 +589,13 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
     assert np.abs(smooth - mps).max() > 1e-3 * np.abs(mps).max()
 
 
+@pytest.mark.parametrize("prescribed", ["node", "buffer"])
 @pytest.mark.parametrize("beside_bodies", ["density", "mixed"])
-def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies):
-    """Rows with a body's node in their support take the density source's right-hand side
-    (gamma_b rho/dt^2 (W-sum* - lattice)/lattice at the predicted positions) under
-    beside_bodies = "density"; every other row, and every row under "mixed", the mixed
-    source's, bit for bit."""
+def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies, prescribed):
+    """Rows with a body's node, or an open boundary's buffer particle, in their support
+    take the density source's right-hand side (gamma_b rho/dt^2 (W-sum* - lattice)/lattice
+    at the predicted positions) under beside_bodies = "density"; every other row, and
+    every row under "mixed", the mixed source's, bit for bit."""
     from dataclasses import replace
     from parmps.fluid.schemes import SOURCES, scheme_class
     constants = _constants()
@@ -610,8 +611,8 @@ def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies):
     beside = kernels.rows_beside(step.near_indptr, step.near_cols, node, len(position))
     # The node itself and the rows within the number density's radius of it.
     assert 1 + 8 <= np.count_nonzero(beside) <= 1 + 24
-    from parmps.core.particles import FLUID, SOLID
-    kind = np.where(node, SOLID, FLUID)
+    from parmps.core.particles import FLUID, INFLOW, SOLID
+    kind = np.where(node, SOLID if prescribed == "node" else INFLOW, FLUID)
     source = cls({**defaults, "beside_bodies": beside_bodies}, constants)
     rhs = source.rhs(replace(step, kind=kind))
     expected = plain.copy()

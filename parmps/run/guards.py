@@ -86,8 +86,11 @@ def inside_rectangles(position, rectangles, margin):
     return which
 
 
-def check_wall_penetration(particles, rectangles, spacing, comm, step):
-    """Stop if an owned fluid particle sits inside wall material (see the module notes)."""
+def check_wall_penetration(particles, rectangles, spacing, comm, step,
+                           source_settings=("mps.mixed.relaxation",)):
+    """Stop if an owned fluid particle sits inside wall material (see the module notes);
+    ``source_settings``: the case's PPE source's settings that strengthen it, named in the
+    message beside the compressibility."""
     if not rectangles:
         return
     n = particles.n_owned
@@ -109,6 +112,6 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step):
             f"step {step}: fluid particle {pid} went through a wall: it is inside "
             f"{rectangles[k][2]} at {format_point(point, '.4g')} ({count} fluid particles inside "
             f"walls); "
-            f"the wall's pressure did not hold it back (weak PPE source: mps.density.relaxation, "
-            f"mps.compressibility) or the step is too long for the flow (lower time.dt_max "
+            f"the wall's pressure did not hold it back (weak PPE source: "
+            f"{', '.join(list(source_settings) + ['mps.compressibility'])}) or the step is too long for the flow (lower time.dt_max "
             f"or time.cfl)", where=point)

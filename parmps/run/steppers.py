@@ -52,6 +52,10 @@ class FluidStepper:
         self.fluid = fluid
         self.participants = list(participants)
         self.spacing = case["particles"]["spacing"]
+        # What a wall-penetration message names: the source's relaxation, if it has one.
+        source = case["mps"]["source"]
+        self.source_settings = tuple(f"mps.{source}.{key}" for key in ("relaxation",)
+                                     if key in case["mps"].get(source, {}))
         self.escaped = EscapedFluid(case, comm, initial_fluid)
         self.DIAGNOSTICS = dict(self.DIAGNOSTICS)
         for participant in self.participants:
@@ -170,7 +174,7 @@ class FluidStepper:
         # After the Courant check: a particle that jumped into a wall because the
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),
-                                      self.spacing, comm, step)
+                                      self.spacing, comm, step, self.source_settings)
         self.fluid_speed = speed
 
     def particle_owner(self, pid):
