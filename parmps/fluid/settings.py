@@ -16,7 +16,7 @@ def _mps_section():
         "neighbour_threshold": Key("float", 0.0, ge=0.0, lt=1.0,
                                    doc="also surface if neighbour count < this times the "
                                        "full-lattice count (0 disables)"),
-        "source": Key("str", "density", choices=tuple(SOURCES),
+        "source": Key("str", "mixed", choices=tuple(SOURCES),
                       doc="the PPE source scheme (settings in [mps.<name>])"),
         "laplacian": Key("str", "standard", choices=tuple(LAPLACIANS),
                          doc="the PPE's Laplacian (settings in [mps.<name>])"),
