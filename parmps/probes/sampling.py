@@ -155,6 +155,12 @@ def kernel_sums(rows, position, kind, pressure, n_owned, comm):
     return total
 
 
+def open_support(sums, full_sum):
+    """Per sample, the kernel sum of the part of its support outside walls and dummies:
+    ``full_sum`` less their weights."""
+    return full_sum - (sums[:, OCCUPIED_WEIGHT] - sums[:, FLUID_WEIGHT])
+
+
 def shepard_pressure(sums, full_sum, min_fill):
     """Σ w p / Σ w over the fluid where the sample is wet, NaN where it is dry.
 
@@ -167,7 +173,7 @@ def shepard_pressure(sums, full_sum, min_fill):
     less than IN_WALL_SHARE outside walls (a point inside one) is measured against that
     share of ``full_sum``."""
     weight = sums[:, FLUID_WEIGHT]
-    open_part = full_sum - (sums[:, OCCUPIED_WEIGHT] - weight)
+    open_part = open_support(sums, full_sum)
     enough = (weight > 0.0) & (weight >= min_fill * np.maximum(open_part,
                                                                IN_WALL_SHARE * full_sum))
     out = np.full(len(sums), np.nan)
@@ -191,7 +197,7 @@ def fluid_fill(sums, full_sum):
     wall (less than IN_WALL_SHARE of the support outside it). Not clipped at 1: the
     lattice's ripple about ``full_sum`` averages out along the line only unclipped."""
     fluid = sums[:, FLUID_WEIGHT]
-    open_part = full_sum - (sums[:, OCCUPIED_WEIGHT] - fluid)
+    open_part = open_support(sums, full_sum)
     fill = np.ones(len(sums))
     outside = open_part >= IN_WALL_SHARE * full_sum
     fill[outside] = fluid[outside] / open_part[outside]

@@ -86,8 +86,7 @@ def inside_rectangles(position, rectangles, margin):
     return which
 
 
-def check_wall_penetration(particles, rectangles, spacing, comm, step,
-                           source_settings=("mps.mixed.relaxation",)):
+def check_wall_penetration(particles, rectangles, spacing, comm, step, source_settings=()):
     """Stop if an owned fluid particle sits inside wall material (see the module notes);
     ``source_settings``: the case's PPE source's settings that strengthen it, named in the
     message beside the compressibility."""
@@ -113,5 +112,5 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step,
             f"{rectangles[k][2]} at {format_point(point, '.4g')} ({count} fluid particles inside "
             f"walls); "
             f"the wall's pressure did not hold it back (weak PPE source: "
-            f"{', '.join(list(source_settings) + ['mps.compressibility'])}) or the step is too long for the flow (lower time.dt_max "
-            f"or time.cfl)", where=point)
+            f"{', '.join([*source_settings, 'mps.compressibility'])}) or the step is too "
+            f"long for the flow (lower time.dt_max or time.cfl)", where=point)

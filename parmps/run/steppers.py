@@ -54,8 +54,8 @@ class FluidStepper:
         self.spacing = case["particles"]["spacing"]
         # What a wall-penetration message names: the source's relaxation, if it has one.
         source = case["mps"]["source"]
-        self.source_settings = tuple(f"mps.{source}.{key}" for key in ("relaxation",)
-                                     if key in case["mps"].get(source, {}))
+        has_relaxation = "relaxation" in case["mps"][source]
+        self.source_settings = (f"mps.{source}.relaxation",) if has_relaxation else ()
         self.escaped = EscapedFluid(case, comm, initial_fluid)
         self.DIAGNOSTICS = dict(self.DIAGNOSTICS)
         for participant in self.participants:

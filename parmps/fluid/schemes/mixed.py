@@ -9,8 +9,8 @@ after the Lobovsky dam break's impact its corner stays compressed and its wall
 pressure reads 24-33 % high (docs/case_overrides.md).
 
 Beside a body (``[mps.mixed] beside_bodies = "density"``, the default) a row whose
-support holds a body's node (or a buffer particle) takes the density source's right-hand side instead,
-``gamma_b rho/dt^2 (n*_i - n0)/n0`` at the predicted positions. Why: the divergence
+support holds a body's node (or a buffer particle) takes the density source's
+right-hand side instead, ``gamma_b rho/dt^2 (n*_i - n0)/n0`` at the predicted positions. Why: the divergence
 term answers the nodes' velocities as if the projection moved them, but a node
 moves after the solve, by its springs and its body's volume constraint under the
 fluid force held over the step. For a body lighter than the fluid in a fast flow
