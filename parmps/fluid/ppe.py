@@ -279,21 +279,7 @@ class PressureSolver:
         before it come first).
         """
         PETSc = self.PETSc
-        n_local = len(rhs)
-        index_type = PETSc.IntType
-        # The matrix made on the CSR arrays themselves (sorted rows), not row by row: a
-        # tenth of the cost. On one rank PETSc keeps the arrays without copying them, so
-        # they are held here until the matrix is destroyed.
-        csr = (indptr.astype(index_type), columns.astype(index_type),
-               values.astype(PETSc.ScalarType))
-        kernels.sort_row_columns(*csr)
-        if self.comm.size > 1:
-            csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
-        matrix = PETSc.Mat().createAIJWithArrays(
-            size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr,
-            comm=self.comm)
-        matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
-        matrix.assemble()
+        matrix, csr = pressure_matrix(PETSc, self.comm, indptr, columns, values, first_row)
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
@@ -352,6 +338,35 @@ class PressureSolver:
 
     def destroy(self):
         self.ksp.destroy()
+
+
+def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
+    """This rank's rows (CSR, global column numbers, first row ``first_row``) as an
+    assembled PETSc matrix marked symmetric; returns (matrix, the CSR arrays it is made on).
+
+    Made on the CSR arrays themselves (sorted rows), not row by row: a tenth of the cost.
+    On one rank PETSc keeps the arrays without copying them, so the caller holds them
+    until the matrix is destroyed.
+
+    Every Laplacian's rows are symmetric by construction (a pair's weight depends on its
+    distance alone, and a row left out or held at P = 0 takes its column with it; tested
+    by tests/mpi/pressure_matrix_worker.py). Saying so is what lets GAMG build its graph
+    from the matrix as it is, without the transpose and the sum it otherwise forms to
+    symmetrise it, a third of every set-up. The flag is set after assembly, which clears it.
+    """
+    n_local = len(indptr) - 1
+    index_type = PETSc.IntType
+    csr = (indptr.astype(index_type), columns.astype(index_type),
+           values.astype(PETSc.ScalarType))
+    kernels.sort_row_columns(*csr)
+    if comm.size > 1:
+        csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
+    matrix = PETSc.Mat().createAIJWithArrays(
+        size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr, comm=comm)
+    matrix.assemble()
+    matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
+    matrix.setOption(PETSc.Mat.Option.STRUCTURALLY_SYMMETRIC, True)
+    return matrix, csr
 
 
 def keep_preconditioner(reuses, iterations_since_setup, last_iterations, setup_cost, limit):
