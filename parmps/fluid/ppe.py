@@ -349,10 +349,11 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     until the matrix is destroyed.
 
     Every Laplacian's rows are symmetric by construction (a pair's weight depends on its
-    distance alone, and a row left out or held at P = 0 takes its column with it; tested
-    by tests/mpi/pressure_matrix_worker.py). Saying so is what lets GAMG build its graph
-    from the matrix as it is, without the transpose and the sum it otherwise forms to
-    symmetrise it, a third of every set-up. The flag is set after assembly, which clears it.
+    distance alone, and a row left out or held at P = 0 takes its column with it; checked
+    at every step by tests/mpi/symmetric_pressure_matrix.py). Saying so lets GAMG build its
+    graph from the matrix as it is, without the transpose and the sum it otherwise forms to
+    symmetrise it: a third of a set-up in 2D, a fifth in 3D. The flag is set after the
+    assembly, which clears it.
     """
     n_local = len(indptr) - 1
     index_type = PETSc.IntType
