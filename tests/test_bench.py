@@ -132,3 +132,38 @@ def test_the_solid_cost_scenes_differ_only_by_the_body(monkeypatch):
     # The water around the body comes first in both, in the same order.
     around = np.count_nonzero(with_body.kind == FLUID)
     np.testing.assert_array_equal(water.position[:around], with_body.position[:around])
+
+
+def test_the_paired_speed_up_is_the_median_of_the_rounds_ratios():
+    from parmps.validation.bench import paired_speed_up
+
+    def run(ranks, seconds):
+        return {"particles": 40022, "ranks": ranks, "seconds": seconds}
+    # A machine 30 % slower in the second round, and a failed third round left out.
+    rounds = [[run(1, 10.0), run(2, 5.5)], [run(1, 13.0), run(2, 7.0)],
+              [run(1, 10.0), run(2, 6.0)], [run(1, 9.0), {"ranks": 2, "error": ["x"]}]]
+    summary = paired_speed_up(rounds)
+    assert summary["particles"] == 40022 and summary["base_ranks"] == 1
+    assert summary["rounds"] == 4
+    ratios = sorted([10.0 / 5.5, 13.0 / 7.0, 10.0 / 6.0])
+    assert summary["speed_up"] == {"2": round(ratios[1], 3)}
+    assert summary["speed_up_range"] == {"2": [round(ratios[0], 3), round(ratios[2], 3)]}
+
+
+def test_repeat_runs_the_rank_counts_in_turn_then_prints_the_speed_up(monkeypatch, capsys):
+    """The command's wiring, with the timed runs stood in for (a machine 10 % slower in
+    the second round): A B A B, one line each, then the summary line."""
+    from parmps.validation import bench
+    calls = []
+
+    def timed_run(args, scene, spacing, ranks):
+        calls.append(ranks)
+        slow = 1.1 if len(calls) > 2 else 1.0
+        return {"particles": 2500, "ranks": ranks, "seconds": slow * 4.0 / ranks ** 0.8}
+    monkeypatch.setattr(bench, "_timed_run", timed_run)
+    assert bench.main(["--particles", "2500", "--ranks", "1", "2", "--repeat", "2"]) == 0
+    lines = [json.loads(text) for text in capsys.readouterr().out.splitlines()]
+    assert calls == [1, 2, 1, 2] and [line.get("ranks") for line in lines[:4]] == calls
+    summary = lines[4]
+    assert summary["rounds"] == 2 and summary["scene"] == "dam_break"
+    assert summary["speed_up"]["2"] == pytest.approx(2 ** 0.8, abs=1e-3)

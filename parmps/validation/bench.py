@@ -1,7 +1,7 @@
 """Benchmark: the dam break at several sizes and rank counts, one JSON line per run::
 
     python -m parmps bench [--particles N ...] [--ranks R ...] [--steps S] [--warmup W]
-                           [--set SECTION.KEY=VALUE ...]
+                           [--repeat K] [--set SECTION.KEY=VALUE ...]
     python -m parmps bench --time-to-solution [--spacing L0 ...] [--ranks R ...]
                            [--end-time T] [--set SECTION.KEY=VALUE ...]
     python -m parmps bench --solid-cost [--ranks R ...] [--steps S] [--warmup W]
@@ -14,6 +14,10 @@ AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
 us_per_particle_step, a breakdown of seconds by part (the slowest rank's) and
 max_rss_mb, the peak resident memory summed over the ranks.
 ``--set`` applies case overrides as parmps does (a pressure scheme, say).
+``--repeat K`` runs the rank counts in turn K times (A B A B) and ends with one more
+line, the speed-up of each rank count over the first: the median over the rounds of
+each round's ratio of times, and their range (:func:`paired_speed_up`). These machines
+drift by 15 % and more between runs; one pair is not a measurement.
 Runs with more ranks than cores oversubscribe, which the line records.
 
 ``--scene dam_break_3d`` does the same with SPHERIC's 3D dam break
@@ -60,6 +64,7 @@ import json
 import math
 import os
 import resource
+import statistics
 import sys
 import tempfile
 
@@ -382,6 +387,10 @@ def build_parser():
                         help="rank counts (default 1; 1 2 with --time-to-solution)")
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--warmup", type=int, default=5)
+    parser.add_argument("--repeat", type=int, default=1,
+                        help="run the rank counts in turn this many times (A B A B), then "
+                             "print the speed-up over the first rank count: the median of "
+                             "the rounds' ratios")
     parser.add_argument("--set", action="append", default=[], dest="overrides",
                         metavar="SECTION.KEY=VALUE", help="a case override, as parmps --set")
     parser.add_argument("--time-to-solution", action="store_true",
@@ -470,12 +479,41 @@ def sizes(args):
     status = 0
     for target in args.particles:
         spacing, _ = spacing_for(target, args.scene)
-        for ranks in args.ranks or [1]:
-            line = _timed_run(args, args.scene, spacing, ranks)
-            status = status or int("error" in line)
-            print(json.dumps(line if "error" not in line else dict(line, particles=target)),
-                  flush=True)
+        rounds = []
+        for _ in range(max(args.repeat, 1)):
+            lines = []
+            for ranks in args.ranks or [1]:
+                line = _timed_run(args, args.scene, spacing, ranks)
+                status = status or int("error" in line)
+                print(json.dumps(line if "error" not in line else dict(line, particles=target)),
+                      flush=True)
+                lines.append(line)
+            rounds.append(lines)
+        if args.repeat > 1 and len(args.ranks or [1]) > 1:
+            print(json.dumps(dict(paired_speed_up(rounds), scene=args.scene)), flush=True)
     return status
+
+
+def paired_speed_up(rounds):
+    """The speed-up of each rank count over the first, from runs made in turn: per round
+    (one run of each rank count, one after the other) the ratio of their times, and over
+    the rounds the median, which a machine whose speed drifts between rounds moves least.
+    Rounds with a failed run are left out."""
+    ratios = {}
+    particles = None
+    for lines in rounds:
+        if any("error" in line for line in lines):
+            continue
+        particles = lines[0]["particles"]
+        for line in lines[1:]:
+            ratios.setdefault(str(line["ranks"]), []).append(
+                lines[0]["seconds"] / line["seconds"])
+    return {"particles": particles, "base_ranks": rounds[0][0]["ranks"],
+            "rounds": len(rounds),
+            "speed_up": {ranks: round(statistics.median(values), 3)
+                         for ranks, values in ratios.items()},
+            "speed_up_range": {ranks: [round(min(values), 3), round(max(values), 3)]
+                               for ranks, values in ratios.items()}}
 
 
 def _timed_run(args, scene_name, spacing, ranks):
