@@ -139,7 +139,7 @@ def test_the_paired_speed_up_is_the_median_of_the_rounds_ratios():
 
     def run(ranks, seconds):
         return {"particles": 40022, "ranks": ranks, "seconds": seconds}
-    # A machine 30 % slower in the second round, and a failed third round left out.
+    # A machine 30 % slower in the second round, and a failed fourth round left out.
     rounds = [[run(1, 10.0), run(2, 5.5)], [run(1, 13.0), run(2, 7.0)],
               [run(1, 10.0), run(2, 6.0)], [run(1, 9.0), {"ranks": 2, "error": ["x"]}]]
     summary = paired_speed_up(rounds)
