@@ -7,7 +7,7 @@ import numpy as np
 
 import pytest
 
-from conftest import run_parmps
+from conftest import error_lines, run_parmps
 
 
 def test_time_to_solution_prints_one_line_per_run():
@@ -167,3 +167,11 @@ def test_repeat_runs_the_rank_counts_in_turn_then_prints_the_speed_up(monkeypatc
     summary = lines[4]
     assert summary["rounds"] == 2 and summary["scene"] == "dam_break"
     assert summary["speed_up"]["2"] == pytest.approx(2 ** 0.8, abs=1e-3)
+
+
+def test_a_repeat_count_below_one_is_refused_in_one_line():
+    result = run_parmps(["bench", "--repeat", "0"], timeout=60)
+    assert result.returncode == 2
+    assert error_lines(result.stderr) == [
+        "parmps: error: bench: argument --repeat: expected a whole number of at least 1, "
+        "not '0'"]

@@ -380,6 +380,16 @@ class _Parser(argparse.ArgumentParser):
         raise CaseError(f"bench: {message}")
 
 
+def _at_least_one(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, not '{text}'")
+    return value
+
+
 def build_parser():
     parser = _Parser(prog="parmps bench", description=__doc__.splitlines()[0])
     parser.add_argument("--particles", type=int, nargs="+", default=[2500, 10000, 40000])
@@ -387,7 +397,7 @@ def build_parser():
                         help="rank counts (default 1; 1 2 with --time-to-solution)")
     parser.add_argument("--steps", type=int, default=20)
     parser.add_argument("--warmup", type=int, default=5)
-    parser.add_argument("--repeat", type=int, default=1,
+    parser.add_argument("--repeat", type=_at_least_one, default=1,
                         help="run the rank counts in turn this many times (A B A B), then "
                              "print the speed-up over the first rank count: the median of "
                              "the rounds' ratios")
@@ -480,7 +490,7 @@ def sizes(args):
     for target in args.particles:
         spacing, _ = spacing_for(target, args.scene)
         rounds = []
-        for _ in range(max(args.repeat, 1)):
+        for _ in range(args.repeat):
             lines = []
             for ranks in args.ranks or [1]:
                 line = _timed_run(args, args.scene, spacing, ranks)
