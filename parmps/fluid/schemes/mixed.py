@@ -9,20 +9,20 @@ after the Lobovsky dam break's impact its corner stays compressed and its wall
 pressure reads 24-33 % high (docs/case_overrides.md).
 
 Beside a body (``[mps.mixed] beside_bodies = "density"``, the default) a row whose
-support holds a body's node (or a buffer particle) takes the density source's
-right-hand side instead, ``gamma_b rho/dt^2 (n*_i - n0)/n0`` at the predicted positions. Why: the divergence
-term answers the nodes' velocities as if the projection moved them, but a node
-moves after the solve, by its springs and its body's volume constraint under the
-fluid force held over the step. For a body lighter than the fluid in a fast flow
-that mismatch grows from step to step: the box-in-flow map lost 5 of its 20 runs
-(solid/fluid density 0.01 and 0.1 from 5 U0, 0.3 at 10 U0) with the divergence
-there (gamma 0.1), and ran all 20 with the density source beside the box; at
-gamma 0.05, 19 (0.1 at 10 U0 stops). The density source answers the nodes'
-positions only, which the coupling was validated with; its gamma_b stays the density
-source's 0.2 (at 0.1 the membrane tube stops and the plate reads 6 % high). The same
-holds for an open boundary's buffer particles, whose motion is prescribed after the
-solve: with the divergence beside its inlet buffer the 3D capsule's duct
-(cases/capsule_3d.toml) put a particle through the floor's corner at the inlet at t = 0.95 s.
+support holds a body's node (or a buffer particle) takes the density source's right-hand
+side instead, ``gamma_b rho/dt^2 (n*_i - n0)/n0`` at the predicted positions. Why: the
+divergence term answers the nodes' velocities as if the projection moved them, but a
+node moves after the solve, by its springs and its body's volume constraint under the
+fluid force held over the step. For a body lighter than the fluid in a fast flow that
+mismatch grows from step to step: the box-in-flow map lost 5 of its 20 runs (solid/fluid
+density 0.01 and 0.1 from 5 U0, 0.3 at 10 U0) with the divergence there (gamma 0.1), and
+ran all 20 with the density source beside the box; at gamma 0.05, 19 (0.1 at 10 U0
+stops). The density source answers the nodes' positions only, which the coupling was
+validated with; its gamma_b stays the density source's 0.2 (at 0.1 the membrane tube
+stops and the plate reads 6 % high). The same holds for an open boundary's buffer
+particles, whose motion is prescribed after the solve: with the divergence beside its
+inlet buffer the 3D capsule's duct (cases/capsule_3d.toml) put a particle through the
+floor's corner at the inlet at t = 0.95 s.
 
 The body force (``[mps.mixed] body_force = "laplacian"``, the default): the divergence
 is taken of u* less the step's dt g, and the body force enters as the flux that the
