@@ -49,8 +49,9 @@ class PressureStep:
     """What a source scheme may read to make the PPE's right-hand side.
 
     ``position`` and ``velocity`` are the start of the step (owned, then
-    ghosts), ``position_star`` and ``velocity_star`` the prediction; ``number_density`` is n* of the owned
-    particles and ``unknown_index`` the owned particles whose rows are unknowns.
+    ghosts), ``position_star`` and ``velocity_star`` the prediction; ``number_density``
+    is n* of the owned particles and ``unknown_index`` the owned particles whose rows
+    are unknowns.
     ``indptr``/``cols`` is the step's pair list (the search radius, which covers
     any position in the step); ``near_indptr``/``near_cols`` its pairs within the
     number density's radius at ``position_star``, for the sums there.
@@ -82,6 +83,38 @@ class PressureStep:
         density, _ = kernels.number_density(self.indptr, self.cols, position, radius,
                                             self.n_owned)
         return density
+
+
+@dataclass
+class PressureSystem:
+    """One step's pressure equation on one rank: CSR ``indptr``/``columns``/``values`` of
+    the rows in global numbering (``first_row`` is this rank's first), ``rhs``;
+    ``pressure_index``: the owned particles with a row, in row order; ``in_rows``: which
+    of those rows are unknowns (the rest are held at P = 0); ``has_pressure``: every local
+    particle that carries a pressure; ``surface_gradient``: the free-surface scheme's
+    terms for the gradient."""
+
+    indptr: np.ndarray
+    columns: np.ndarray
+    values: np.ndarray
+    rhs: np.ndarray
+    pressure_index: np.ndarray
+    in_rows: np.ndarray
+    first_row: int
+    has_pressure: np.ndarray
+    surface_gradient: object
+
+
+class _Step:
+    """What the phases of one step hand on to each other: the particles (owned, then
+    ghosts), dt and the moving owned particles, then what each phase adds (the pair list,
+    the prediction, n* and the free surface)."""
+
+    def __init__(self, particles, dt, moving):
+        self.particles = particles
+        self.n = particles.n_owned
+        self.dt = dt
+        self.moving = moving
 
 
 class FluidSolver:
@@ -140,66 +173,88 @@ class FluidSolver:
         ghosts): the pressure equation becomes ``div (1/rho_i grad P)`` (bodies'
         nodes as particles of their own density); None: one density.
         """
-        timers = self.timers
-        decomposition = self.decomposition
-        c = self.constants
-        n = particles.n_owned
-        kind = particles.kind
-        position = particles.position
-        velocity = particles.velocity
-        moving = self.moving(kind[:n])
+        s = _Step(particles, dt, self.moving(particles.kind[:particles.n_owned]))
+        self._search(s)
+        self._predict(s)
+        self._number_density(s)
+        system = self._pressure_system(s, dirichlet, mobility)
+        pressure = self._solve(s, system, step_number)
+        self._correct(s, pressure, system)
+        self.timers.stop()
+        return {"ksp_iterations": self.last_iterations, "ksp_residual": self.last_residual,
+                "n_surface": int(np.count_nonzero(s.surface & s.moving))}
 
-        timers.start("neighbours")
+    def _search(self, s):
+        """The step's pair list within the search radius (rows: the owned particles that
+        take part); flags the owned dry walls."""
+        self.timers.start("neighbours")
+        particles, n = s.particles, s.n
+        kind, position = particles.kind, particles.position
         # Dummies need no sums of their own: they carry no pressure and do not move; they
         # count only as the neighbours of others. Nor do the walls away from the water.
         wetting = self._wetting(position, kind, n)
-        indptr, cols = pair_list(position, c.search_radius, n_rows=n, rows=kind[:n] != DUMMY,
-                                 expected_pairs=self.expected_pairs,
-                                 only_near=kind[:n] == WALL, near=wetting)
-        dry = (kind[:n] == WALL) & (indptr[1:] == indptr[:-1])
-        particles.dry[:n] = dry
+        s.indptr, s.cols = pair_list(position, self.constants.search_radius, n_rows=n,
+                                     rows=kind[:n] != DUMMY, expected_pairs=self.expected_pairs,
+                                     only_near=kind[:n] == WALL, near=wetting)
+        s.dry = (kind[:n] == WALL) & (s.indptr[1:] == s.indptr[:-1])
+        particles.dry[:n] = s.dry
         # Room for the next step's search in one pass: the count changes by well under
         # a few percent from one step to the next.
-        self.expected_pairs = int(1.05 * len(cols)) + 64
+        self.expected_pairs = int(1.05 * len(s.cols)) + 64
 
+    def _predict(self, s):
+        """The explicit part: viscosity and the body force, then the collisions, into
+        ``s.position_star`` and ``s.velocity_star`` (ghosts refreshed)."""
+        timers, c, n, moving, dt = self.timers, self.constants, s.n, s.moving, s.dt
+        particles = s.particles
         timers.start("operators")
-        velocity_star = velocity.copy()
-        position_star = position.copy()
+        velocity_star = particles.velocity.copy()
+        position_star = particles.position.copy()
         acceleration = np.broadcast_to(self.gravity, (n, c.dimension)).copy()
         if c.viscosity > 0.0:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
-                kernels.vector_laplacian_sum(indptr, cols, position, velocity,
-                                             c.re_laplacian, n, moving)
+                kernels.vector_laplacian_sum(s.indptr, s.cols, particles.position,
+                                             particles.velocity, c.re_laplacian, n, moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
-        decomposition.refresh([position_star, velocity_star])
-
+        self.decomposition.refresh([position_star, velocity_star])
         if self.collision:
             timers.start("operators")
-            change = kernels.collision_change(indptr, cols, position_star, velocity_star,
-                                              self.moving(kind), self.collision_distance,
-                                              self.restitution, n, position)
+            change = kernels.collision_change(s.indptr, s.cols, position_star, velocity_star,
+                                              self.moving(particles.kind),
+                                              self.collision_distance, self.restitution, n,
+                                              particles.position)
             velocity_star[:n] += change
             position_star[:n] += dt * change
             timers.start("halo")
-            decomposition.refresh([position_star, velocity_star])
+            self.decomposition.refresh([position_star, velocity_star])
+        s.position_star, s.velocity_star = position_star, velocity_star
 
-        timers.start("operators")
+    def _number_density(self, s):
+        """n* at the predicted positions and the free surface it marks."""
+        self.timers.start("operators")
+        c = self.constants
         # The sums on the number density's radius at the predicted positions (n*, the
         # sources' divergence, the gradient) over the pairs within it: a third of the list.
-        near_indptr, near_cols = kernels.pairs_within(indptr, cols, position_star,
-                                                      c.re_number_density, n)
-        number_density, neighbour_count = kernels.number_density(
-            near_indptr, near_cols, position_star, c.re_number_density, n)
-        surface = number_density < self.surface_threshold * c.n0
+        s.near_indptr, s.near_cols = kernels.pairs_within(s.indptr, s.cols, s.position_star,
+                                                          c.re_number_density, s.n)
+        s.number_density, neighbour_count = kernels.number_density(
+            s.near_indptr, s.near_cols, s.position_star, c.re_number_density, s.n)
+        s.surface = s.number_density < self.surface_threshold * c.n0
         if self.neighbour_threshold > 0.0:
-            surface |= neighbour_count < self.neighbour_threshold * c.neighbour_count0
+            s.surface |= neighbour_count < self.neighbour_threshold * c.neighbour_count0
+
+    def _pressure_system(self, s, dirichlet, mobility):
+        """The pressure equation's rows on this rank: which particles are unknowns, the
+        matrix in global row numbers, and the source scheme's right-hand side."""
+        c, n, particles = self.constants, s.n, s.particles
+        kind = particles.kind
         has_pressure = kind != DUMMY
         unknown, surface_unknown = self.free_surface.unknowns(
-            has_pressure[:n], surface, (kind[:n] == FLUID) | (kind[:n] == WALL))
-        unknown &= ~dry
-        surface_unknown &= ~dry
+            has_pressure[:n], s.surface, (kind[:n] == FLUID) | (kind[:n] == WALL))
+        unknown &= ~s.dry
+        surface_unknown &= ~s.dry
         if dirichlet is not None:
             # Open boundaries: a closed channel otherwise has no pressure level.
             unknown &= ~dirichlet
@@ -210,62 +265,71 @@ class FluidSolver:
         row_number[pressure_index] = first_row + np.arange(len(pressure_index))
         is_unknown = np.zeros(len(particles), np.int8)
         is_unknown[:n] = np.where(surface_unknown, kernels.SURFACE_ROW, unknown)
-        timers.start("halo")
-        decomposition.refresh([row_number, is_unknown])
+        self.timers.start("halo")
+        self.decomposition.refresh([row_number, is_unknown])
 
-        timers.start("assembly")
+        self.timers.start("assembly")
         csr_indptr, columns, values = self.laplacian.rows(
-            indptr, cols, position_star, row_number, is_unknown,
-            c.density * self.compressibility / dt ** 2, mobility)
+            s.indptr, s.cols, s.position_star, row_number, is_unknown,
+            c.density * self.compressibility / s.dt ** 2, mobility)
         extra_diagonal, surface_gradient = self.free_surface.terms(
-            indptr, cols, position_star, is_unknown, self.moving(kind), self.laplacian, n)
+            s.indptr, s.cols, s.position_star, is_unknown, self.moving(kind), self.laplacian, n)
         if extra_diagonal is not None:
             if mobility is not None:
                 extra_diagonal *= mobility[:n]
             # Each row's diagonal is its first entry.
             values[csr_indptr[:-1]] += extra_diagonal[pressure_index]
         rhs = np.zeros(len(pressure_index))
-        in_rows = (unknown | surface_unknown)[pressure_index]
         with_source = unknown[pressure_index]
         rhs[with_source] = self.source.rhs(PressureStep(
-            dt=dt, n_owned=n, indptr=indptr, cols=cols, position=position,
-            velocity=velocity, position_star=position_star, velocity_star=velocity_star,
-            number_density=number_density, unknown_index=pressure_index[with_source],
-            near_indptr=near_indptr, near_cols=near_cols, kind=kind, gravity=self.gravity,
-            laplacian=self.laplacian))
+            dt=s.dt, n_owned=n, indptr=s.indptr, cols=s.cols, position=particles.position,
+            velocity=particles.velocity, position_star=s.position_star,
+            velocity_star=s.velocity_star, number_density=s.number_density,
+            unknown_index=pressure_index[with_source], near_indptr=s.near_indptr,
+            near_cols=s.near_cols, kind=kind, gravity=self.gravity, laplacian=self.laplacian))
+        return PressureSystem(csr_indptr, columns, values, rhs, pressure_index,
+                              (unknown | surface_unknown)[pressure_index], first_row,
+                              has_pressure, surface_gradient)
 
-        timers.start("solve")
-        guess = np.where(in_rows, particles.pressure[:n][pressure_index], 0.0)
+    def _solve(self, s, system, step_number):
+        """The pressure of every local particle (0 off the rows; ghosts refreshed)."""
+        self.timers.start("solve")
+        particles = s.particles
+        guess = np.where(system.in_rows, particles.pressure[:s.n][system.pressure_index], 0.0)
         solution, iterations, residual = self.pressure_solver.solve(
-            csr_indptr, columns, values, rhs, guess, step_number, first_row)
+            system.indptr, system.columns, system.values, system.rhs, guess, step_number,
+            system.first_row)
         self.last_iterations, self.last_residual = iterations, residual
 
-        timers.start("operators")
+        self.timers.start("operators")
         pressure = np.zeros(len(particles))
-        pressure[pressure_index] = np.where(in_rows, solution, 0.0)
+        pressure[system.pressure_index] = np.where(system.in_rows, solution, 0.0)
         if self.clamp:
             np.maximum(pressure, 0.0, out=pressure)
-        timers.start("halo")
-        decomposition.refresh([pressure])
+        self.timers.start("halo")
+        self.decomposition.refresh([pressure])
+        return pressure
 
-        timers.start("operators")
+    def _correct(self, s, pressure, system):
+        """The projection: the pressure gradient corrects the prediction of the moving
+        particles; then the shift, if any; the owned particles take the result."""
+        self.timers.start("operators")
+        n, moving, dt, particles = s.n, s.moving, s.dt, s.particles
+        position_star, velocity_star = s.position_star, s.velocity_star
         # Only the particles the correction moves need the gradient.
         pressure_gradient = self.gradient.gradient(
-            near_indptr, near_cols, position_star, pressure, has_pressure, n, moving,
-            surface=surface_gradient)
-        correction = pressure_gradient[moving] / c.density
+            s.near_indptr, s.near_cols, position_star, pressure, system.has_pressure, n,
+            moving, surface=system.surface_gradient)
+        correction = pressure_gradient[moving] / self.constants.density
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction
         if self.shifting.active:
-            self._shift(particles, indptr, cols, position_star, velocity_star, surface, dt)
-
+            self._shift(particles, s.indptr, s.cols, position_star, velocity_star, s.surface,
+                        dt)
         particles.position[:n] = position_star[:n]
         particles.velocity[:n] = velocity_star[:n]
         particles.pressure[:n] = pressure[:n]
-        particles.number_density[:n] = number_density
-        timers.stop()
-        return {"ksp_iterations": iterations, "ksp_residual": residual,
-                "n_surface": int(np.count_nonzero(surface & moving))}
+        particles.number_density[:n] = s.number_density
 
     def mark_dry(self, particles):
         """Flag the owned dry walls of ``particles`` (owned and current ghosts) as the step
