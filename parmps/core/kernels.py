@@ -657,36 +657,44 @@ def _collision_change(indptr, cols, position, velocity, moving, distance_limit, 
                 out[i, k] -= impulse * (pair_component(position, i, j, k) / r)
         if weight_sum <= 0.0:
             continue
-        # Only a particle in contact needs the wall's normal: a second pass over its fixed
-        # partners, at the start of the step.
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if moving[j]:
-                continue
-            s2 = pair_distance2(start, i, j, d)
-            if 0.0 < s2 < normal_reach2:
-                r_start = np.sqrt(s2)
-                weight = (1.0 - r_start / normal_reach) ** 2
-                for k in range(d):
-                    normal[k] += weight * (pair_component(start, i, j, k) / r_start)
-        length = _length(normal, d)
-        if length <= 1e-12:
-            # No fixed partner around where the particle started (a step longer than the
-            # support): the contacts' own directions, overlap-weighted.
-            for k in range(d):
-                normal[k] = contact[k]
-            length = _length(normal, d)
-            if length <= 1e-12 * weight_sum:
-                continue
-        approach = 0.0
-        for k in range(d):
-            approach += (velocity[i, k] - wall_velocity[k] / weight_sum) * (normal[k] / length)
-        if approach <= 0.0:
-            continue
-        impulse = (1.0 + restitution) * approach
-        for k in range(d):
-            out[i, k] -= impulse * (normal[k] / length)
+        _wall_contact(indptr, cols, moving, start, velocity, i, d, normal_reach, normal_reach2,
+                      normal, contact, wall_velocity, weight_sum, restitution, out)
     return out
+
+
+@numba.njit(cache=True, inline="always")
+def _wall_contact(indptr, cols, moving, start, velocity, i, d, normal_reach, normal_reach2,
+                  normal, contact, wall_velocity, weight_sum, restitution, out):
+    """The fixed partners' impulse on particle i in contact with them (into ``out[i]``):
+    along the wall's normal, from a second pass over them at the start of the step (only a
+    particle in contact needs it), against the partners' weighted mean velocity."""
+    for p in range(indptr[i], indptr[i + 1]):
+        j = cols[p]
+        if moving[j]:
+            continue
+        s2 = pair_distance2(start, i, j, d)
+        if 0.0 < s2 < normal_reach2:
+            r_start = np.sqrt(s2)
+            weight = (1.0 - r_start / normal_reach) ** 2
+            for k in range(d):
+                normal[k] += weight * (pair_component(start, i, j, k) / r_start)
+    length = _length(normal, d)
+    if length <= 1e-12:
+        # No fixed partner around where the particle started (a step longer than the
+        # support): the contacts' own directions, overlap-weighted.
+        for k in range(d):
+            normal[k] = contact[k]
+        length = _length(normal, d)
+        if length <= 1e-12 * weight_sum:
+            return
+    approach = 0.0
+    for k in range(d):
+        approach += (velocity[i, k] - wall_velocity[k] / weight_sum) * (normal[k] / length)
+    if approach <= 0.0:
+        return
+    impulse = (1.0 + restitution) * approach
+    for k in range(d):
+        out[i, k] -= impulse * (normal[k] / length)
 
 
 @numba.njit(cache=True)
