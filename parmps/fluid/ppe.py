@@ -283,47 +283,21 @@ class PressureSolver:
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
-        x.getArray()[:] = guess
-        # Collective: every rank must rebuild the KSP together, or PETSc hangs.
-        if self.comm.allreduce(int(matrix.getSizes() != self.sizes)) > 0:
-            # Migration changed this rank's rows; a preconditioner (GAMG) cannot
-            # change size, so start afresh.
-            self.ksp.destroy()
-            self.ksp = self._make_ksp()
-            self.sizes = matrix.getSizes()
-            self.fresh_iterations = None
+        self._fit_layout(matrix)
         reuse = not self.setup_due()
-        self.ksp.getPC().setReusePreconditioner(reuse)
-        self.ksp.setOperators(matrix)
-        # The first solve sets the preconditioner up, which reads the rest of the options.
-        with self._options_inserted(report_unused=self.solves == 0):
-            self.ksp.solve(b, x)
+        reason = self._solve_with(matrix, b, x, guess, reuse, report_unused=self.solves == 0)
         self.solves += 1
-        reason = self.ksp.getConvergedReason()
         if reason < 0 and reuse:
             # A preconditioner kept from earlier matrices can be indefinite for this one
             # (CG then stops with DIVERGED_INDEFINITE_PC): solve again with one set up
             # for this matrix before calling the step a failure. Every rank reuses or
             # not alike, so every rank takes this branch together.
             reuse = False
-            self.ksp.getPC().setReusePreconditioner(False)
-            self.ksp.setOperators(matrix)
-            x.getArray()[:] = guess
-            with self._options_inserted():
-                self.ksp.solve(b, x)
-            reason = self.ksp.getConvergedReason()
+            reason = self._solve_with(matrix, b, x, guess, reuse)
         iterations = self.ksp.getIterationNumber()
         residual = self.ksp.getResidualNorm()
         solution = x.getArray().copy()
-        self.last_iterations = iterations
-        if reuse:
-            self.preconditioner_age += 1
-            self.iterations_since_setup += iterations
-        else:
-            self.preconditioner_age = 0
-            self.iterations_since_setup = iterations
-            self.fresh_iterations = iterations
-            self.setups += 1
+        self._count(iterations, reuse)
         for item in (matrix, b, x):
             item.destroy()
         del csr
@@ -335,6 +309,39 @@ class PressureSolver:
                              f"needs other settings (e.g. -pressure_pc_type hypre, "
                              f"-pressure_ksp_max_it)")
         return solution, iterations, residual
+
+    def _fit_layout(self, matrix):
+        """A new KSP when any rank's rows changed (collective: every rank must rebuild it
+        together, or PETSc hangs): migration changed the layout, and a preconditioner
+        (GAMG) cannot change size, so it starts afresh."""
+        if self.comm.allreduce(int(matrix.getSizes() != self.sizes)) > 0:
+            self.ksp.destroy()
+            self.ksp = self._make_ksp()
+            self.sizes = matrix.getSizes()
+            self.fresh_iterations = None
+
+    def _solve_with(self, matrix, b, x, guess, reuse, report_unused=False):
+        """One KSP solve from ``guess``, the preconditioner kept or set up afresh; returns
+        PETSc's converged reason. The first solve sets the preconditioner up, which reads
+        the rest of the options."""
+        self.ksp.getPC().setReusePreconditioner(reuse)
+        self.ksp.setOperators(matrix)
+        x.getArray()[:] = guess
+        with self._options_inserted(report_unused=report_unused):
+            self.ksp.solve(b, x)
+        return self.ksp.getConvergedReason()
+
+    def _count(self, iterations, reuse):
+        """The reuse policy's tallies after a solve (``keep_preconditioner``)."""
+        self.last_iterations = iterations
+        if reuse:
+            self.preconditioner_age += 1
+            self.iterations_since_setup += iterations
+        else:
+            self.preconditioner_age = 0
+            self.iterations_since_setup = iterations
+            self.fresh_iterations = iterations
+            self.setups += 1
 
     def destroy(self):
         self.ksp.destroy()
