@@ -302,9 +302,10 @@ class PressureSolver:
             item.destroy()
         del csr
         if reason < 0:
-            raise RunFailure(f"pressure solve diverged at step {step}: {_reason_name(PETSc, reason)}"
-                             f" after {iterations} iterations (residual {residual:.3e}), with a "
-                             f"preconditioner set up for this step's matrix; the run may have "
+            raise RunFailure(f"pressure solve diverged at step {step}: "
+                             f"{_reason_name(PETSc, reason)} after {iterations} iterations "
+                             f"(residual {residual:.3e}), with a preconditioner set up for "
+                             f"this step's matrix; the run may have "
                              f"gone unstable (lower time.cfl or time.dt_max), or the solver "
                              f"needs other settings (e.g. -pressure_pc_type hypre, "
                              f"-pressure_ksp_max_it)")
