@@ -505,7 +505,8 @@ def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradie
     for the sum over P_j - P_i; the Pmin shift's part (P_i - Pmin_i) d/n0
     sum_j r_ij w / r^2 is only rescaled. Rows whose A_i has an eigenvalue below
     ``min_eigenvalue`` (a truncated neighbourhood at a free surface or in a
-    splash) are left as they are. Returns how many rows were corrected. A_i is d×d: in 2D its eigenvalue
+    splash) are left as they are. Returns how many rows were corrected. A_i is d×d:
+    in 2D its eigenvalue
     and inverse in closed form, in 3D the eigenvalue by Jacobi rotations and the
     inverse by the adjugate. ``rows``: optional mask of the rows to correct.
     """

@@ -6,7 +6,8 @@ come first), ``indices[indptr[i]:indptr[i+1]]`` are the particles j != i within
 ``bincount`` and the pressure matrix is assembled without sorting.
 
 The search is a numba kernel: a numpy cell-list search costs about 19 µs per
-particle at 40k particles (measured on the project's 2-core machines), four times the whole step's budget.
+particle at 40k particles (measured on the project's 2-core machines), four
+times the whole step's budget.
 """
 
 import math

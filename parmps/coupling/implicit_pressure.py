@@ -29,7 +29,8 @@ relaxes the node's velocity towards its neighbours' at the rate k_i / m_i,
 which for a light node is rho0/rho_i times the fluid's own. The step's viscous
 limit (time.viscous_number) keeps that explicit relaxation stable for a
 particle of the fluid's density only; a node at density ratio 0.1 in
-box_in_flow relaxes at dt k/m = 3.3 per step, beyond the explicit limit of 2. The node's own share of
+box_in_flow relaxes at dt k/m = 3.3 per step, beyond the explicit limit of 2.
+The node's own share of
 the relaxation beyond the fluid's is therefore taken implicitly (backward
 Euler in u_i): the force is divided by ``1 + dt k_i (1/m_i - 1/m_0)``, m_0 the
 mass of a fluid particle. At density ratio 1 and above the force is the weak

@@ -8,7 +8,8 @@ from parmps.core.settings import search_radius
 
 @dataclass(frozen=True)
 class MPSConstants:
-    """Radii in metres, lattice reference values and the fluid's material (DESIGN: docs/design.md §1)."""
+    """Radii in metres, lattice reference values and the fluid's material
+    (docs/design.md §1)."""
 
     dimension: int
     spacing: float

@@ -67,7 +67,8 @@ SECTIONS = {
         "rtol": Key("float", 1.0e-6, gt=0.0, lt=1.0,
                     doc="CG stops at this residual relative to the right-hand side"),
         "max_iterations": Key("int", 1000, gt=0,
-                              doc="most CG iterations of one solve (reaching it: the solve failed)"),
+                              doc="most CG iterations of one solve (reaching it: the solve "
+                                  "failed)"),
         "reuse_preconditioner": Key("int", 50, ge=0,
                                     doc="most steps a preconditioner set-up is reused for "
                                         "(0: set up every step)"),

@@ -2,10 +2,11 @@
 
 ``/frames/<step, 8 digits>`` holds ``FRAME_FIELDS`` of every particle and the
 attributes ``time``, ``step`` and ``dt``; ``/vertex_index`` is 0, 1, 2, ... as
-long as the largest frame, the particles' vertex connectivity in the XDMF; with bodies, ``/frames/<step>/solids/
-<body>/position`` and ``velocity`` hold every node (anchors included) in the
-body's own order, ``/solids/<body>/springs`` the mesh once and ``/solids/<body>/surface``
-its boundary facets (m, d) once (2D: the loop's edges; 3D: outward triangles).
+long as the largest frame, the particles' vertex connectivity in the XDMF; with
+bodies, ``/frames/<step>/solids/<body>/position`` and ``velocity`` hold every node
+(anchors included) in the body's own order, ``/solids/<body>/springs`` the mesh once
+and ``/solids/<body>/surface`` its boundary facets (m, d) once (2D: the loop's edges; 3D:
+outward triangles).
 """
 
 import os

@@ -20,7 +20,8 @@ distribution; one set of cuts per axis (a tensor grid, balanced by the counts
 along each axis) does not: on the dam break at 42k particles its largest block
 holds 5.5 % (2 x 2) and 14 % (4 x 2) more than the mean, the nested cuts'
 0.5 % and 2.1 %; on the 3D dam break at l0 = 3 cm, 2 x 2 x 2, 7.5 % against
-2.7 % (the ghosts are the same to 0.1 %). The price: a block's neighbours across a column boundary are those
+2.7 % (the ghosts are the same to 0.1 %). The price: a block's neighbours across a
+column boundary are those
 whose y range overlaps its own, not a fixed set of 3^d - 1, which the halo
 below finds from the boxes. ``cuts[k]`` has one row per group of the first k
 coordinates and g_k + 1 columns; the outer ones hold the domain's bounds for

@@ -128,7 +128,8 @@ INTRO = """# Case-file reference
 This page is generated from the schema (`parmps.schema.SECTIONS`) when the documentation
 is built: it lists every section and key a case file may hold, with its type, unit,
 default, allowed values and meaning. A key without a default is required; one whose default
-is "unset" is optional and has no value unless given (what its absence means is in its text). Keys of a
+is "unset" is optional and has no value unless given (what its absence means is in its
+text). Keys of a
 sub-table are written `key.sub` (a table `[section.key]`) or `key[].sub` (an array of
 tables `[[section.key]]`). Units are SI; `l0` is the particle spacing
 (`particles.spacing`). A case may also hold a top-level `title` string.

@@ -51,7 +51,8 @@ less with the load than the wall time; MPI's busy waiting counts in it on 2 rank
 - ``front_m``: the leading edge on the floor at the end time, the largest x of the
   fluid particles whose centres lie within ``FLOOR_BAND`` (20 mm) of the floor,
   plus half a spacing (where the particles' volume ends), measured from the left
-  wall (:func:`parmps.tools.analysis.front`). By t = 0.5 s the surge has reached the right wall (x = 1 m) and runs up it,
+  wall (:func:`parmps.tools.analysis.front`). By t = 0.5 s the surge has reached the
+  right wall (x = 1 m) and runs up it,
   so ``front_m`` says the water is there; ``front_rms`` is the accuracy figure:
 - ``front_rms``: the column is Martin & Moyce's n^2 = 2 (height 2a, a = 0.25 m), so
   the surge front of every frame is compared with their record for

@@ -8,7 +8,8 @@ moves the fluid and pushes the bodies (the coupling takes the same one). Each
 class declares ``KEYS``, the settings of its own table ``[mps.<name>]`` in the
 case; the case chooses one of each with ``mps.source``, ``mps.laplacian`` and
 ``mps.gradient``; a shifting scheme (``mps.shifting``) supplies ``shift(...)``, a
-small move of the fluid particles after the correction that keeps them ordered. The exact form of each scheme, with its source, is in
+small move of the fluid particles after the correction that keeps them ordered.
+The exact form of each scheme, with its source, is in
 docs/design.md §1.4 and docs/schemes.md. Khayyer & Gotoh's names: HS is
 ``density_rate``, HS + ECS ``compensated_rate``, HL the ``higher_order``
 Laplacian, GC the ``corrected`` gradient; Kondo & Koshizuka's second time

@@ -401,7 +401,8 @@ def build_body(k, spec, gravity, domain=None):
 
 
 def build_bodies(case):
-    """Every ``[[body]]`` of a validated case, as :class:`~parmps.solids.mass_spring.body.Body` objects."""
+    """Every ``[[body]]`` of a validated case, as
+    :class:`~parmps.solids.mass_spring.body.Body` objects."""
     dimension = case.get("dimension", 2)
     gravity = case.get("physics", {}).get("gravity", [0.0] * (dimension - 1) + [-9.81])
     bodies = [build_body(k, spec, gravity, case.get("domain"))
