@@ -2,6 +2,7 @@
 """SPHERIC Test 2 (the 3D dam break against a box): a result against Kleefsman et al. (2005).
 
     python validation/dam_break_3d/plot.py OUT/result.h5 [--png docs/dam_break_3d.png]
+                                          [--windows 0.1] [--section 0.6 0.8 1.0]
 
 Run the case first, e.g. at 0.55/10 m on 2 ranks:
 
@@ -9,7 +10,8 @@ Run the case first, e.g. at 0.55/10 m on 2 ranks:
 
 Prints, per sensor, the arrival (P1-P4), the means over the compared windows and the
 peak of the 10 ms running mean, simulated beside measured; plots P1-P8 over the record
-and the level gauges H1-H4; exits 1 when a target of validation.toml is missed.
+and the level gauges H1-H4; with --windows, each sensor's mean over short windows beside
+the record's; with --section, the flow through the sensors' line at chosen times; exits 1 when a target of validation.toml is missed.
 """
 
 import argparse
@@ -48,6 +50,69 @@ def table(metrics):
                      f"({row['peak_measured']:.0f}) at {row['peak_time']:.3f} "
                      f"({row['peak_time_measured']:.3f})")
     return "\n".join(lines)
+
+
+def windows(path, check, width, start=0.4):
+    """Per sensor, the mean pressure over consecutive windows ``width`` long from ``start`` to
+    the run's end, simulated / measured (a dry sample counts as 0 Pa, as in the metric), and
+    the first time above 500 Pa of each: where in time a mean's error comes from."""
+    import numpy as np
+
+    from parmps.tools import analysis
+    record = analysis.reference_table(check.reference)
+    te = list(record.values())[0]
+    rows = []
+    for name in (f"P{i}" for i in range(1, 9)):
+        t, p = analysis.read_probe(path, name)
+        p = np.nan_to_num(p, nan=0.0)
+        edges = np.arange(start, t[-1] - 0.5 * width + 1e-9, width)
+        cells = " ".join(f"{analysis.window_mean(t, p, a, a + width):5.0f}/"
+                         f"{analysis.window_mean(te, record[name], a, a + width):5.0f}"
+                         for a in edges)
+        wet = analysis.first_crossing(t, p, 500.0)
+        wet_measured = analysis.first_crossing(te, record[name], 500.0)
+        rows.append(f"{name}  first > 500 Pa {wet:.3f} ({wet_measured:.3f}) s  {cells}")
+    head = (f"mean pressure [Pa] simulated/measured over {width:g} s windows from {start:g} s; "
+            f"the first window starts at {start:g} s")
+    return "\n".join([head] + rows)
+
+
+def section(path, times, png, y=0.471, half_width=None):
+    """The tank's (x, z) section through the sensors' line (y = 0.471 m, one spacing thick),
+    near the box, at the frames nearest ``times``: the fluid coloured by pressure with its
+    velocity, the walls in black, the sensors P1-P8 marked."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from parmps.core.particles import FLUID
+    from parmps.result import open_result
+    with open_result(path) as result:
+        spacing = result.case["particles"]["spacing"]
+        half_width = 0.5 * spacing if half_width is None else half_width
+        figure, axes = plt.subplots(len(times), 1, figsize=(8, 2.6 * len(times)),
+                                    squeeze=False)
+        for ax, time in zip(axes[:, 0], times):
+            frame = result.frames.nearest(time)
+            x, kind = frame["position"], frame["kind"]
+            near = (np.abs(x[:, 1] - y) <= half_width) & (x[:, 0] < 1.6) & (x[:, 2] < 0.8)
+            fluid = near & (kind == FLUID)
+            ax.scatter(x[near & (kind != FLUID), 0], x[near & (kind != FLUID), 2], s=2, c="k")
+            shown = ax.scatter(x[fluid, 0], x[fluid, 2], s=5, c=frame["pressure"][fluid],
+                               cmap="viridis", vmin=0.0, vmax=6000.0)
+            v = frame["velocity"]
+            ax.quiver(x[fluid, 0], x[fluid, 2], v[fluid, 0], v[fluid, 2], scale=100,
+                      width=0.0012)
+            for sensor in result.case["probe"]:
+                if sensor["kind"] == "pressure":
+                    ax.plot(sensor["position"][0], sensor["position"][2], "r+", ms=8)
+            ax.set_aspect("equal")
+            ax.set_title(f"t = {frame.time:.2f} s, y = {y} m")
+            figure.colorbar(shown, ax=ax, label="p [Pa]")
+        figure.tight_layout()
+        figure.savefig(png, dpi=90)
+        plt.close(figure)
 
 
 def plot(path, check, png):
@@ -91,9 +156,21 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("result", help="result.h5 of cases/dam_break_3d.toml")
     parser.add_argument("--png", help="where to write the plot (default: none)")
+    parser.add_argument("--windows", type=float, metavar="SECONDS",
+                        help="also print each sensor's mean over windows this long, from "
+                             "0.4 s on, beside the record's")
+    parser.add_argument("--section", type=float, nargs="+", metavar="T",
+                        help="draw the (x, z) section through the sensors at these times")
+    parser.add_argument("--section-png", default="section.png",
+                        help="where --section draws (default section.png)")
     args = parser.parse_args()
+    if args.section:
+        section(args.result, args.section, args.section_png)
+        print(f"section: {args.section_png}")
     metrics = check.measure(args.result)
     print(table(metrics))
+    if args.windows:
+        print(windows(args.result, check, args.windows))
     if args.png:
         plot(args.result, check, args.png)
         print(f"plot: {args.png}")
