@@ -228,6 +228,46 @@ class _SolveTraffic:
         return {name: now[name] - self.start[name] for name in now}
 
 
+class _WarmTally:
+    """An observer that starts the clock once the warm-up steps are done and counts, over the
+    timed steps, this rank's ghost-to-owned ratio, the solve's iterations and the most
+    neighbour ranks."""
+
+    def __init__(self, comm, run, warmup, solve_traffic):
+        self.comm, self.run, self.warmup = comm, run, warmup
+        self.solve_traffic = solve_traffic
+        self.marks = {}
+        self.ghost_ratio, self.iterations, self.neighbours = 0.0, 0, 0
+
+    def __call__(self, state):
+        import time
+        decomposition = self.run.decomposition
+        if state.step > self.warmup:
+            self.ghost_ratio += decomposition.n_ghost / max(state.particles.n_owned, 1)
+            self.iterations += int(state.diagnostics.get("ksp_iterations", 0))
+            self.neighbours = max(self.neighbours, len(decomposition.neighbours))
+        if state.step == self.warmup:
+            self.comm.Barrier()
+            self.marks = {"start": time.perf_counter(),
+                          "fluid": dict(self.run.fluid.timers.seconds),
+                          "halo": decomposition.halo_seconds,
+                          "migration": decomposition.migration_seconds,
+                          "setups": self.run.pressure_solver.setups}
+            self.solve_traffic.mark()
+
+    def breakdown(self, seconds):
+        """Each phase's seconds over the timed steps, the slowest rank's."""
+        from mpi4py import MPI
+        timers, decomposition, marks = self.run.fluid.timers, self.run.decomposition, self.marks
+        parts = {part: timers.seconds[part] - marks["fluid"][part]
+                 for part in ("neighbours", "operators", "assembly", "solve", "output")}
+        parts["halo"] = decomposition.halo_seconds - marks["halo"]
+        parts["migration"] = decomposition.migration_seconds - marks["migration"]
+        # The rest of the step: the bodies' substeps, the coupling, the driver's phases.
+        parts["other"] = max(0.0, seconds - sum(parts.values()))
+        return {k: self.comm.allreduce(v, op=MPI.MAX) for k, v in parts.items()}
+
+
 def worker(args):
     """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
     import time
@@ -243,41 +283,16 @@ def worker(args):
                  scene_name=args.scene)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
     run = Simulation(case, "", comm, directory)
-    timers = run.fluid.timers
-    decomposition = run.decomposition
-    marks = {}
-    # Over the timed steps: this rank's ghost-to-owned ratios, and the solve's iterations.
-    tally = {"ghost_ratio": 0.0, "iterations": 0, "neighbours": 0}
-
-    def mark_warm(state):
-        if state.step > args.warmup:
-            tally["ghost_ratio"] += decomposition.n_ghost / max(state.particles.n_owned, 1)
-            tally["iterations"] += int(state.diagnostics.get("ksp_iterations", 0))
-            tally["neighbours"] = max(tally["neighbours"], len(decomposition.neighbours))
-        if state.step == args.warmup:
-            comm.Barrier()
-            marks["start"] = time.perf_counter()
-            marks["fluid"] = dict(timers.seconds)
-            marks["halo"] = decomposition.halo_seconds
-            marks["migration"] = decomposition.migration_seconds
-            marks["setups"] = run.pressure_solver.setups
-            solve_traffic.mark()
-
-    run.execute(extra_observers=[Callback(mark_warm)])
+    tally = _WarmTally(comm, run, args.warmup, solve_traffic)
+    run.execute(extra_observers=[Callback(tally)])
     comm.Barrier()
-    seconds = time.perf_counter() - marks["start"]
-    breakdown = {part: timers.seconds[part] - marks["fluid"][part]
-                 for part in ("neighbours", "operators", "assembly", "solve", "output")}
-    breakdown["halo"] = decomposition.halo_seconds - marks["halo"]
-    breakdown["migration"] = decomposition.migration_seconds - marks["migration"]
-    # The rest of the step: the bodies' substeps, the coupling, the driver's phases.
-    breakdown["other"] = max(0.0, seconds - sum(breakdown.values()))
-    breakdown = {k: comm.allreduce(v, op=MPI.MAX) for k, v in breakdown.items()}
+    seconds = time.perf_counter() - tally.marks["start"]
+    breakdown = tally.breakdown(seconds)
     particles = comm.allreduce(run.state.particles.n_owned)
     solve = {name: comm.allreduce(value / args.steps, op=MPI.MAX)
              for name, value in solve_traffic.since_mark().items()}
-    ghosts_per_owned = comm.allreduce(tally["ghost_ratio"] / args.steps, op=MPI.MAX)
-    neighbours = comm.allreduce(tally["neighbours"], op=MPI.MAX)
+    ghosts_per_owned = comm.allreduce(tally.ghost_ratio / args.steps, op=MPI.MAX)
+    neighbours = comm.allreduce(tally.neighbours, op=MPI.MAX)
     # Peak resident memory of every rank (kB on Linux), summed: the job's footprint.
     memory = comm.allreduce(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) / 1024.0
     if comm.rank == 0:
@@ -289,11 +304,11 @@ def worker(args):
             "max_rss_mb": round(memory, 1),
             "bytes_per_particle": round(memory * 2 ** 20 / particles),
             "spacing": spacing,
-            "decomposition": decomposition.name,
+            "decomposition": run.decomposition.name,
             "ghosts_per_owned": round(ghosts_per_owned, 4),
             "neighbours": neighbours,
-            "ksp_iterations_per_step": round(tally["iterations"] / args.steps, 2),
-            "amg_setups": run.pressure_solver.setups - marks["setups"],
+            "ksp_iterations_per_step": round(tally.iterations / args.steps, 2),
+            "amg_setups": run.pressure_solver.setups - tally.marks["setups"],
             **{name: round(value, 1) for name, value in solve.items()},
             "oversubscribed": comm.size > (os.cpu_count() or 1),
         }
