@@ -73,8 +73,8 @@ def windows(path, check, width, start=0.4):
         wet = analysis.first_crossing(t, p, 500.0)
         wet_measured = analysis.first_crossing(te, record[name], 500.0)
         rows.append(f"{name}  first > 500 Pa {wet:.3f} ({wet_measured:.3f}) s  {cells}")
-    head = (f"mean pressure [Pa] simulated/measured over {width:g} s windows from {start:g} s; "
-            f"the first window starts at {start:g} s")
+    head = (f"each sensor's first time above 500 Pa, simulated (measured), and its mean "
+            f"pressure [Pa] simulated/measured over {width:g} s windows from {start:g} s")
     return "\n".join([head] + rows)
 
 
