@@ -68,6 +68,7 @@ import resource
 import statistics
 import sys
 import tempfile
+import time
 
 from parmps.errors import CaseError
 from parmps.validation import ROOT
@@ -240,7 +241,6 @@ class _WarmTally:
         self.ghost_ratio, self.iterations, self.neighbours = 0.0, 0, 0
 
     def __call__(self, state):
-        import time
         decomposition = self.run.decomposition
         if state.step > self.warmup:
             self.ghost_ratio += decomposition.n_ghost / max(state.particles.n_owned, 1)
@@ -270,8 +270,6 @@ class _WarmTally:
 
 def worker(args):
     """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
-    import time
-
     from mpi4py import MPI
 
     from parmps.run.observers import Callback
