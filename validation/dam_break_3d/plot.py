@@ -78,10 +78,10 @@ def windows(path, check, width, start=0.4):
     return "\n".join([head] + rows)
 
 
-def section(path, times, png, y=0.471, half_width=None):
-    """The tank's (x, z) section through the sensors' line (y = 0.471 m, one spacing thick),
-    near the box, at the frames nearest ``times``: the fluid coloured by pressure with its
-    velocity, the walls in black, the sensors P1-P8 marked."""
+def section(path, times, png, half_width=None):
+    """The tank's (x, z) section through the sensors' line (the pressure probes' y, 0.471 m
+    in the case; one spacing thick), near the box, at the frames nearest ``times``: the fluid
+    coloured by pressure with its velocity, the walls in black, the sensors P1-P8 marked."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -92,6 +92,9 @@ def section(path, times, png, y=0.471, half_width=None):
     with open_result(path) as result:
         spacing = result.case["particles"]["spacing"]
         half_width = 0.5 * spacing if half_width is None else half_width
+        sensors = [probe["position"] for probe in result.case["probe"]
+                   if probe["kind"] == "pressure"]
+        y = sensors[0][1]
         figure, axes = plt.subplots(len(times), 1, figsize=(8, 2.6 * len(times)),
                                     squeeze=False)
         for ax, time in zip(axes[:, 0], times):
@@ -105,9 +108,8 @@ def section(path, times, png, y=0.471, half_width=None):
             v = frame["velocity"]
             ax.quiver(x[fluid, 0], x[fluid, 2], v[fluid, 0], v[fluid, 2], scale=100,
                       width=0.0012)
-            for sensor in result.case["probe"]:
-                if sensor["kind"] == "pressure":
-                    ax.plot(sensor["position"][0], sensor["position"][2], "r+", ms=8)
+            for sensor in sensors:
+                ax.plot(sensor[0], sensor[2], "r+", ms=8)
             ax.set_aspect("equal")
             ax.set_title(f"t = {frame.time:.2f} s, y = {y} m")
             figure.colorbar(shown, ax=ax, label="p [Pa]")
