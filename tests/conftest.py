@@ -1,7 +1,9 @@
 """Shared helpers: run parmps as a user would, serially or under mpirun, with a timeout."""
 
+import re
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import pytest
@@ -33,9 +35,23 @@ def run_python(args, ranks=1, timeout=300, cwd=None):
     if ranks > 1:
         argv = mpirun_command(ranks, argv)
     status, stdout, stderr, _ = launch.execute(argv, timeout, cwd=cwd or ROOT)
+    if status not in (None, 0) and ranks > 1 and lost_by_mpirun(stderr):
+        # Open MPI 4.1 (Debian 12) now and then loses track of a rank that finished cleanly
+        # while other mpiruns run beside it (scripts/test runs two at once): it reports the
+        # rank "with PID 0" as having exited without MPI_Finalize and returns 1 (seen once in
+        # ~900 launches, after the run had written "done" and its output; upstream
+        # open-mpi/ompi#12607, #9389). A rank of ours that really skipped MPI_Finalize is
+        # reported with its own PID, so this runs the command once more only for that report.
+        warnings.warn(f"mpirun lost a finished rank (PID 0); running again: {' '.join(args)}")
+        status, stdout, stderr, _ = launch.execute(argv, timeout, cwd=cwd or ROOT)
     if status is None:
         pytest.fail(f"timed out after {timeout} s: {' '.join(args)}")
     return subprocess.CompletedProcess(argv, status, stdout, stderr)
+
+
+def lost_by_mpirun(stderr):
+    """Whether mpirun's report is Open MPI's notice of a rank it lost track of (PID 0)."""
+    return bool(re.search(r"mpirun has exited due to process rank \d+ with PID 0 on\s", stderr))
 
 
 def error_lines(stderr):

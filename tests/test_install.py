@@ -4,7 +4,7 @@ import subprocess
 import sys
 import zipfile
 
-from conftest import ROOT
+from conftest import ROOT, lost_by_mpirun
 from parmps import validation
 
 
@@ -31,3 +31,14 @@ def test_the_installed_data_is_preferred_to_the_checkout(tmp_path, monkeypatch):
     assert validation.data_root() == str(package / "_data")
     (package / "_data" / "validation").rmdir()
     assert validation.data_root() == str(tmp_path)
+
+
+def test_only_open_mpis_lost_rank_notice_is_run_again():
+    """The test helper runs a command again only on mpirun's notice of a rank it lost track of
+    (PID 0); a rank that exited without MPI_Finalize is reported with its PID and fails."""
+    notice = ("mpirun has exited due to process rank {} with PID {} on\n"
+              "node vm exiting improperly. There are three reasons this could occur:\n")
+    assert lost_by_mpirun("...\n" + notice.format(0, 0))
+    assert lost_by_mpirun(notice.format(1, 0))
+    assert not lost_by_mpirun(notice.format(0, 41230))
+    assert not lost_by_mpirun("parmps: error: particle 779 left the domain")
