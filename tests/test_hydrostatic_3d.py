@@ -1,17 +1,18 @@
 """The 3D still tank (cases/hydrostatic_3d.toml, validation/hydrostatic_3d) against the weight
 of the water above each particle, with the 2D still tank's targets.
 
-The run here is the validation's full 2 s at its coarser spacing (2 cm, 10 layers) on 2
-ranks. Of the targets, that spacing meets the bottom row's noise and the column's height,
-which are asserted; it misses the bottom row's mean (-2.4 %), the RMS (2.2 %) and the
-probe (-3.7 %), which converge with the spacing (1 cm, the validation's second run in its
-README: bottom -1.04 %, RMS 0.78 %, probe -1.4 %, noise 0.27 %, height -0.30 %). Those
-misses are recorded in the README and the 3D issue, not asserted here.
+The run here is the validation's first 1.25 s at its coarser spacing (2 cm, 10 layers) on 2
+ranks, averaged over 0.5-1.25 s; the bottom row's noise and the column's height are asserted
+(measured: 1.3 % and -0.10 %). Every target over the full 2 s is checked by `python -m parmps
+validate hydrostatic_3d` (at 2 cm on 2 ranks: bottom -0.36 %, RMS 0.93 %, noise 0.96 %,
+height -0.14 %; docs/validation/hydrostatic_3d.md), kept out of the suite's 15 minutes: over
+the shorter window the time average is noisier (RMS 1.17 %), so the RMS and the bottom mean
+are not asserted here.
 
-Where they come from (docs/validation/hydrostatic_3d.md) is checked on the same run with
+Where the error sits (docs/validation/hydrostatic_3d.md) is checked on the same run with
 validation/hydrostatic_3d/profile.py: away from the walls, every row from 1 l0 up reads a
-hydrostatic level within 0.2 l0 of the water's depth (measured on 1 rank over 0.5-2 s:
-0.10-0.14 l0 low), and the bottom row's dip below them stays under 0.4 l0 (measured: 0.12 l0).
+hydrostatic level within 0.2 l0 of the water's depth (measured over 0.5-1.25 s: 0.02-0.08 l0
+above it), and the bottom row's dip below them stays under 0.4 l0 (measured: 0.03 l0).
 """
 
 import importlib.util
@@ -31,7 +32,7 @@ def test_the_3d_still_tank_holds_its_noise_and_height_targets_at_the_coarser_spa
     spacing = HYDROSTATIC_3D.run["spacings"][0]
     result = run_parmps([HYDROSTATIC_3D.case_path, "-o", tmp_path,
                          "--set", f"particles.spacing={spacing!r}",
-                         "--end-time", HYDROSTATIC_3D.run["end_time"]], ranks=2, timeout=600)
+                         "--end-time", "1.25"], ranks=2, timeout=600)
     assert result.returncode == 0, result.stderr
     measured = HYDROSTATIC_3D.measure(tmp_path / "result.h5")
     assert measured["bottom_std"] < tolerance["bottom_noise"], measured["bottom_std"]
