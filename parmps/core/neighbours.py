@@ -149,8 +149,9 @@ def _grid(position, radius):
     ``reach`` of them span the radius despite rounding): the (2 reach + 1)^d cells around a
     particle hold every neighbour and little else. Larger when the particles are sparse,
     so the cell table stays O(n) in memory; ``reach`` then falls to 1."""
-    origin = position.min(axis=0) - 1e-12
-    extent = position.max(axis=0) - origin
+    lowest, highest = _bounds(position)
+    origin = lowest - 1e-12
+    extent = highest - origin
     cell_size = radius / CELLS_PER_RADIUS * (1.0 + 1e-12)
     while math.prod(int(e / cell_size) + 1 for e in extent) > 4 * len(position) + 4096:
         cell_size *= 1.5
@@ -160,11 +161,49 @@ def _grid(position, radius):
     return origin, cell_size, reach, cells, stride
 
 
+@numba.njit(cache=True)
+def _bounds(position):
+    """The smallest and largest coordinate along each axis, in one pass over the rows
+    (numba's ``min(axis=0)`` walks the columns with a stride: 15 times slower)."""
+    n, d = position.shape
+    lowest = position[0].copy()
+    highest = position[0].copy()
+    for p in range(1, n):
+        for k in range(d):
+            x = position[p, k]
+            if x < lowest[k]:
+                lowest[k] = x
+            elif x > highest[k]:
+                highest[k] = x
+    return lowest, highest
+
+
+@numba.njit(cache=True)
 def _cell_order(cell, cells, stride):
-    """The particles in cell order, and where each cell's run of them starts."""
-    key = cell @ stride
-    order = np.argsort(key, kind="stable")
-    return order, np.searchsorted(key[order], np.arange(int(np.prod(cells)) + 1))
+    """The particles in cell order (stable: by index within a cell), and where each cell's
+    run of them starts: a counting sort, O(particles + cells). A rank's cells span the box
+    of its particles and ghosts, mostly empty where a tank's walls rise above the water; an
+    argsort and a binary search per cell cost three times as much there."""
+    n, d = cell.shape
+    n_cells = 1
+    for k in range(d):
+        n_cells *= cells[k]
+    key = np.empty(n, np.int64)
+    cell_start = np.zeros(n_cells + 1, np.int64)
+    for p in range(n):
+        value = 0
+        for k in range(d):
+            value += cell[p, k] * stride[k]
+        key[p] = value
+        cell_start[value + 1] += 1
+    for c in range(n_cells):
+        cell_start[c + 1] += cell_start[c]
+    filled = cell_start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for p in range(n):
+        order[filled[key[p]]] = p
+        filled[key[p]] += 1
+    return order, cell_start
 
 
 @numba.njit(cache=True)
