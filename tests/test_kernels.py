@@ -513,3 +513,26 @@ def test_rows_near_marks_the_rows_with_a_marked_particle_within_the_radius(scene
     np.testing.assert_array_equal(got, expected)
     assert 0 < expected.sum() < rows.sum() // 2
     assert not rows_near(position, 3.7 * SPACING, rows, np.zeros(len(position), bool)).any()
+
+
+@pytest.mark.parametrize("dimension", [1, 2, 3])
+def test_the_cell_order_is_a_stable_sort_by_cell_and_the_lists_match_brute_force(dimension):
+    """The counting sort gives what a stable argsort of the cell keys gives, with each cell's
+    run starting where the keys below it end, also in a box mostly empty (a cluster far
+    from the rest); the pair lists on it are the brute-force pairs within the radius."""
+    from parmps.core.neighbours import _cell_coordinates, _cell_order, _grid
+    rng = np.random.default_rng(7)
+    position = rng.random((400, dimension)) * 0.2
+    position[:40] += 1.5
+    radius = 0.03
+    origin, cell_size, _, cells, stride = _grid(position, radius)
+    cell = _cell_coordinates(position, origin, cell_size)
+    order, cell_start = _cell_order(cell, cells, stride)
+    key = cell @ stride
+    assert np.array_equal(order, np.argsort(key, kind="stable"))
+    assert np.array_equal(cell_start, np.searchsorted(np.sort(key), np.arange(np.prod(cells) + 1)))
+    indptr, indices = pair_list(position, radius)
+    distance = np.linalg.norm(position[:, None] - position[None], axis=-1)
+    for i in range(len(position)):
+        expected = np.flatnonzero((distance[i] < radius) & (np.arange(len(position)) != i))
+        assert np.array_equal(np.sort(indices[indptr[i]:indptr[i + 1]]), expected)
