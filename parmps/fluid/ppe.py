@@ -351,6 +351,8 @@ class PressureSolver:
 def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     """This rank's rows (CSR, global column numbers, first row ``first_row``) as an
     assembled PETSc matrix marked symmetric; returns (matrix, the CSR arrays it is made on).
+    Each row's entries are sorted by column in ``columns`` and ``values`` themselves when
+    their types are PETSc's (the caller's arrays change order).
 
     Made on the CSR arrays themselves (sorted rows), not row by row: a tenth of the cost.
     On one rank PETSc keeps the arrays without copying them, so the caller holds them
@@ -365,8 +367,11 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     """
     n_local = len(indptr) - 1
     index_type = PETSc.IntType
-    csr = (indptr.astype(index_type), columns.astype(index_type),
-           values.astype(PETSc.ScalarType))
+    # The arrays are taken as they are where their types are PETSc's (the values: float64),
+    # and sorted in place: a copy of the values cost 9-17 ms a step at 4.6M entries (3D,
+    # 100k particles), mostly the first touch of its fresh pages.
+    csr = (indptr.astype(index_type, copy=False), columns.astype(index_type, copy=False),
+           values.astype(PETSc.ScalarType, copy=False))
     kernels.sort_row_columns(*csr)
     if comm.size > 1:
         csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
