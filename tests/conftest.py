@@ -39,7 +39,7 @@ def run_python(args, ranks=1, timeout=300, cwd=None):
         # Open MPI 4.1 (Debian 12) now and then loses track of a rank that finished cleanly
         # while other mpiruns run beside it (scripts/test runs two at once): it reports the
         # rank "with PID 0" as having exited without MPI_Finalize and returns 1 (seen once in
-        # ~900 launches, after the run had written "done" and its output; upstream
+        # a whole suite, after the run had written "done" and its output; upstream
         # open-mpi/ompi#12607, #9389). A rank of ours that really skipped MPI_Finalize is
         # reported with its own PID, so this runs the command once more only for that report.
         warnings.warn(f"mpirun lost a finished rank (PID 0); running again: {' '.join(args)}")
