@@ -164,7 +164,8 @@ def _grid(position, radius):
 @numba.njit(cache=True)
 def _bounds(position):
     """The smallest and largest coordinate along each axis, in one pass over the rows
-    (numba's ``min(axis=0)`` walks the columns with a stride: 15 times slower)."""
+    (numpy's ``min(axis=0)`` and ``max(axis=0)`` over n x d positions took 1.1-1.3 ms for
+    22k particles in 2D against 0.07 ms here, 7-8.5 against 0.6 ms for 150k in 3D)."""
     n, d = position.shape
     lowest = position[0].copy()
     highest = position[0].copy()
