@@ -3,6 +3,7 @@ scoped PETSc options and the pressure gradient the coupling takes from the fluid
 
 import ast
 import os
+import sys
 import importlib
 import pkgutil
 from pathlib import Path
@@ -243,6 +244,26 @@ def test_one_blas_thread_per_rank_unless_the_user_chose(monkeypatch):
         monkeypatch.delenv(variable, raising=False)
     assert cli.main(["--help"]) == 0
     assert all(os.environ[variable] == "1" for variable in cli.BLAS_THREAD_VARIABLES)
+
+
+def test_launched_programs_get_one_blas_thread_unless_the_user_chose(monkeypatch):
+    """Every program parmps launches (the benchmark's worker and the tests' MPI programs
+    are not ``python -m parmps``) starts with one BLAS thread per rank, and OpenBLAS, when
+    it is numpy's BLAS, runs with it."""
+    from parmps.validation import launch
+    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+        monkeypatch.delenv(variable, raising=False)
+    env = launch.environment()
+    assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "1"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
+    assert launch.environment()["OPENBLAS_NUM_THREADS"] == "2"
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS")
+    probe = ("import ctypes, numpy\n"
+             "paths = {line.split()[-1] for line in open('/proc/self/maps') if 'libopenblas' in line}\n"
+             "print(ctypes.CDLL(paths.pop()).openblas_get_num_threads() if paths else 'none')")
+    status, stdout, stderr, _ = launch.execute([sys.executable, "-c", probe], timeout=60)
+    assert status == 0, stderr
+    assert stdout.strip() in ("1", "none")
 
 
 def test_nothing_outside_parallel_names_a_decomposition():

@@ -451,6 +451,10 @@ def main(argv=None):
     """The ``bench`` command; returns the exit status."""
     args = build_parser().parse_args(sys.argv[1:] if argv is None else argv)
     if args.worker:
+        # Before numpy loads OpenBLAS, for a worker started by hand (cProfile) as for one
+        # the launcher starts: a second BLAS thread per rank spins in GAMG's coarse solves.
+        from parmps.cli import one_blas_thread_per_rank
+        one_blas_thread_per_rank(os.environ)
         worker(args)
         return 0
     if args.time_to_solution:
