@@ -2,10 +2,10 @@
 scoped PETSc options and the pressure gradient the coupling takes from the fluid."""
 
 import ast
-import os
-import sys
 import importlib
+import os
 import pkgutil
+import sys
 from pathlib import Path
 
 import numpy as np
