@@ -22,6 +22,7 @@ import sys
 import traceback
 
 from parmps.errors import INTERRUPTED, CaseError, RunFailure
+from parmps.parallel.mpi import one_blas_thread_per_rank
 
 log = logging.getLogger("parmps")
 
@@ -145,22 +146,6 @@ def _verdict(comm, action):
     if error is not None:
         raise CaseError(error)
     return result
-
-
-# parmps runs one MPI rank per core; a BLAS library that starts its own worker
-# threads (Debian's OpenBLAS, loaded with PETSc, spins one per rank in GAMG's
-# coarse solves) would put two busy threads on each core.
-BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
-
-
-def one_blas_thread_per_rank(environ):
-    """Ask BLAS for a single thread unless the user has chosen a count.
-
-    Must run before PETSc (and with it OpenBLAS) is loaded: OpenBLAS reads the
-    variable once, when the library is loaded.
-    """
-    for variable in BLAS_THREAD_VARIABLES:
-        environ.setdefault(variable, "1")
 
 
 # The commands that come before a case (``python -m parmps validate ...``): name -> module

@@ -236,25 +236,27 @@ def test_the_coupling_feels_the_fluids_corrected_gradient():
 
 def test_one_blas_thread_per_rank_unless_the_user_chose(monkeypatch):
     from parmps import cli
+    from parmps.parallel.mpi import BLAS_THREAD_VARIABLES, one_blas_thread_per_rank
     environ = {"OMP_NUM_THREADS": "3"}
-    cli.one_blas_thread_per_rank(environ)
+    one_blas_thread_per_rank(environ)
     assert environ == {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "3"}
     # main() sets it before anything loads PETSc (and OpenBLAS with it).
-    for variable in cli.BLAS_THREAD_VARIABLES:
+    for variable in BLAS_THREAD_VARIABLES:
         monkeypatch.delenv(variable, raising=False)
     assert cli.main(["--help"]) == 0
-    assert all(os.environ[variable] == "1" for variable in cli.BLAS_THREAD_VARIABLES)
+    assert all(os.environ[variable] == "1" for variable in BLAS_THREAD_VARIABLES)
 
 
 def test_launched_programs_get_one_blas_thread_unless_the_user_chose(monkeypatch):
-    """Every program parmps launches (the benchmark's worker and the tests' MPI programs
-    are not ``python -m parmps``) starts with one BLAS thread per rank, and OpenBLAS, when
-    it is numpy's BLAS, runs with it."""
+    """Every program parmps launches by either launcher (the benchmark's worker and the
+    tests' MPI programs are not ``python -m parmps``) starts with one BLAS thread per rank,
+    and OpenBLAS, when it is numpy's BLAS, runs with it."""
+    from parmps.parallel.mpi import BLAS_THREAD_VARIABLES, launch_environment
     from parmps.validation import launch
-    for variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+    for variable in BLAS_THREAD_VARIABLES:
         monkeypatch.delenv(variable, raising=False)
-    env = launch.environment()
-    assert env["OPENBLAS_NUM_THREADS"] == env["OMP_NUM_THREADS"] == "1"
+    for env in (launch.environment(), launch_environment()):
+        assert all(env[variable] == "1" for variable in BLAS_THREAD_VARIABLES)
     monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")
     assert launch.environment()["OPENBLAS_NUM_THREADS"] == "2"
     monkeypatch.delenv("OPENBLAS_NUM_THREADS")

@@ -136,13 +136,32 @@ _LAUNCH_VARIABLES = ("PMIX_", "OMPI_COMM_WORLD_", "OMPI_APP_CTX_", "OMPI_MCA_ess
                      "OMPI_MCA_initial_wdir", "OMPI_MCA_shmem_RUNTIME_QUERY_hint")
 
 
+# parmps runs one MPI rank per core; a BLAS library that starts its own worker
+# threads (Debian's OpenBLAS, loaded with numpy and PETSc, spins one per rank after
+# GAMG's coarse solves) would put two busy threads on each core.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")
+
+
+def one_blas_thread_per_rank(environ):
+    """Ask BLAS for a single thread unless the user has chosen a count.
+
+    Must run before numpy (and with it OpenBLAS) is loaded: OpenBLAS reads the
+    variable once, when the library is loaded.
+    """
+    for variable in BLAS_THREAD_VARIABLES:
+        environ.setdefault(variable, "1")
+
+
 def launch_environment(environ=None):
     """The environment for starting ``mpirun`` from a process that may itself be an MPI rank.
 
     Importing mpi4py initialises MPI as a singleton, which puts launcher
     variables into the C environment that ``subprocess`` passes on by default;
     ``os.environ`` is the copy from before, minus any launcher variables, plus
-    Open MPI's consent to run as root when this process is root.
+    Open MPI's consent to run as root when this process is root, and one BLAS thread
+    per rank unless the user chose a count: not every launched program is ``python -m
+    parmps`` (the benchmark's worker, the tests' MPI programs), and each loads OpenBLAS
+    with numpy before it could ask.
     """
     environ = dict(os.environ if environ is None else environ)
     clean = {key: value for key, value in environ.items()
@@ -152,6 +171,7 @@ def launch_environment(environ=None):
         # launchers (bench, tests) has accepted that by running them.
         clean.setdefault("OMPI_ALLOW_RUN_AS_ROOT", "1")
         clean.setdefault("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+    one_blas_thread_per_rank(clean)
     return clean
 
 

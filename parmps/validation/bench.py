@@ -453,7 +453,7 @@ def main(argv=None):
     if args.worker:
         # Before numpy loads OpenBLAS, for a worker started by hand (cProfile) as for one
         # the launcher starts: a second BLAS thread per rank spins in GAMG's coarse solves.
-        from parmps.cli import one_blas_thread_per_rank
+        from parmps.parallel.mpi import one_blas_thread_per_rank
         one_blas_thread_per_rank(os.environ)
         worker(args)
         return 0

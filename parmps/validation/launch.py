@@ -34,16 +34,12 @@ def command(case, out, sets=(), end_time=None, petsc=(), ranks=1):
 
 
 def environment(spin=False):
-    """The environment a launched run gets: this one, without the launcher variables of an
-    MPI singleton, with Open MPI's consent to root, one BLAS thread per rank unless the
-    user chose a count, and, unless ``spin``, Open MPI's yield when idle (timed benchmarks
-    keep Open MPI's default, spinning)."""
-    from parmps.cli import one_blas_thread_per_rank
+    """The environment a launched run gets: :func:`parmps.parallel.mpi.launch_environment`
+    (no launcher variables of an MPI singleton, Open MPI's consent to root, one BLAS thread
+    per rank) and, unless ``spin``, Open MPI's yield when idle (timed benchmarks keep Open
+    MPI's default, spinning)."""
     from parmps.parallel.mpi import launch_environment
     env = launch_environment()
-    # Not every launched program is ``python -m parmps`` (the benchmark's worker, the
-    # tests' MPI programs), and each loads OpenBLAS with numpy before it could ask.
-    one_blas_thread_per_rank(env)
     # Containers often lack the kernel support of vader's single-copy transport (as
     # scripts/setup says too): Open MPI then fails at the first large message.
     env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
