@@ -167,6 +167,47 @@ def test_poisson_rows_match_reference_and_are_symmetric(scene):
         assert got[(key[1], key[0])] == pytest.approx(value, rel=1e-12)
 
 
+def test_poisson_rows_fill_a_room_of_the_solvers_integer_type_or_say_it_is_short(scene):
+    """The rows written into the caller's room (PETSc's 32-bit columns, taken without a
+    copy) are poisson_rows' entry for entry; a room one entry short is refused (-1), and
+    the Laplacian scheme then assembles again into room for every pair, whatever room the
+    last step left it."""
+    from types import SimpleNamespace
+
+    from parmps.fluid.schemes.laplacian import StandardLaplacian
+    position, _, _, is_dummy, _, _, _, _ = scene
+    radius = 3.1 * SPACING
+    n = len(position)
+    indptr, cols = pair_list(position, 3.7 * SPACING)
+    row_number = np.full(n, -1, np.int64)
+    row_number[~is_dummy] = np.arange(int((~is_dummy).sum()))
+    unknown = (~is_dummy).astype(np.int8)
+    unknown[::7] = 0
+    arguments = (indptr, cols, position, radius, row_number, unknown, 860.0, 0.45, 7.0, False)
+    row_ptr, columns, values = kernels.poisson_rows(*arguments)
+    entries = len(columns)
+    assert entries < kernels.poisson_rows_room(indptr, row_number)
+    for room, written in ((entries, entries), (entries - 1, -1)):
+        into_columns, into_values = np.empty(room, np.int32), np.empty(room)
+        into_ptr, got = kernels.poisson_rows_into(*arguments, np.ones(n), into_columns,
+                                                  into_values)
+        assert got == written
+        if got == entries:
+            np.testing.assert_array_equal(into_ptr, row_ptr)
+            np.testing.assert_array_equal(into_columns, columns)
+            np.testing.assert_array_equal(into_values, values)
+    laplacian = StandardLaplacian({}, SimpleNamespace(
+        laplacian_coefficient=860.0, n0_laplacian=7.0 / 860.0, re_laplacian=radius))
+    for expected in (0, entries - 1, entries + 5):
+        laplacian.expected_entries = expected
+        got = laplacian.rows(indptr, cols, position, row_number, unknown, 0.45,
+                             index_dtype=np.dtype(np.int32))
+        assert got[1].dtype == np.int32
+        for a, b in zip(got, (row_ptr, columns, values)):
+            np.testing.assert_array_equal(a, b)
+        assert laplacian.expected_entries >= entries
+
+
 def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene):
     """With every mobility 1 the rows are poisson_rows' bit for bit; with a light patch
     (rho0/rho = 10, a body at density ratio 0.1) each pair weighs w (m_i + m_j)/2 and the

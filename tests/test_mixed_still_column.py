@@ -40,6 +40,8 @@ class _Comm:
 class _Hydrostatic:
     """Returns the field it is given and keeps the system it was asked to solve."""
 
+    index_dtype = np.dtype(np.int64)
+
     def __init__(self, pressure):
         self.pressure = pressure
 

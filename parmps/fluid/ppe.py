@@ -23,6 +23,8 @@ import math
 import os
 import sys
 
+import numpy as np
+
 from parmps.core import kernels
 from parmps.core.lattice import coupling_shells
 from parmps.errors import CaseError, RunFailure
@@ -260,6 +262,11 @@ class PressureSolver:
             PETSc.Sys.popErrorHandler()
         return ksp
 
+    @property
+    def index_dtype(self):
+        """PETSc's integer type: the matrix takes columns of this type without a copy."""
+        return np.dtype(self.PETSc.IntType)
+
     def describe(self):
         return (f"KSP {self.ksp.getType()} + PC {self.ksp.getPC().getType()}, "
                 f"rtol {self.ksp.getTolerances()[0]:g}")
@@ -355,8 +362,8 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     their types are PETSc's (the caller's arrays change order).
 
     Made on the CSR arrays themselves (sorted rows), not row by row: a tenth of the cost.
-    On one rank PETSc keeps the arrays without copying them, so the caller holds them
-    until the matrix is destroyed.
+    On one rank PETSc keeps the arrays without copying them (petsc4py keeps them with
+    the matrix, alive as long as it is).
 
     Every Laplacian's rows are symmetric by construction (a pair's weight depends on its
     distance alone, and a row left out or held at P = 0 takes its column with it; checked

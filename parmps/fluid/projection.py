@@ -271,7 +271,8 @@ class FluidSolver:
         self.timers.start("assembly")
         csr_indptr, columns, values = self.laplacian.rows(
             s.indptr, s.cols, s.position_star, row_number, is_unknown,
-            c.density * self.compressibility / s.dt ** 2, mobility)
+            c.density * self.compressibility / s.dt ** 2, mobility,
+            index_dtype=self.pressure_solver.index_dtype)
         extra_diagonal, surface_gradient = self.free_surface.terms(
             s.indptr, s.cols, s.position_star, is_unknown, self.moving(kind), self.laplacian, n)
         if extra_diagonal is not None:

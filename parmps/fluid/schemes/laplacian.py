@@ -13,6 +13,8 @@ Both assemble ``-<lap p>_i + (rho c/dt^2) p_i`` row by row with
   standard one (docs/schemes.md, HL, for what each makes true).
 """
 
+import numpy as np
+
 from parmps.config import Key
 from parmps.core import kernels
 from parmps.fluid.schemes.khayyer_gotoh import (HL_NORMALISATIONS,
@@ -23,6 +25,8 @@ from parmps.fluid.schemes.khayyer_gotoh import (HL_NORMALISATIONS,
 class StandardLaplacian:
     KEYS = {}
     inverse_cube = False
+    # The room for the next step's rows: this step's entries and a little more.
+    expected_entries = 0
 
     def __init__(self, settings, constants):
         self.constants = constants
@@ -32,18 +36,31 @@ class StandardLaplacian:
         self.dirichlet_diagonal = constants.laplacian_coefficient * constants.n0_laplacian
 
     def rows(self, indptr, cols, position, row_number, is_unknown, diagonal_shift,
-             mobility=None):
+             mobility=None, index_dtype=np.int64):
         """CSR (row pointers, global columns, values) of the owned rows with a pressure.
 
         ``mobility``: rho0/rho of every local particle where bodies' nodes take part
         in the solve (the implicit-pressure coupling), None for one density.
+        ``index_dtype``: the columns' type (the solver's, which then takes them as they are).
         """
+        if mobility is None:
+            mobility = np.ones(len(row_number))
         arguments = (indptr, cols, position, self.constants.re_laplacian, row_number,
                      is_unknown, self.coefficient, diagonal_shift, self.dirichlet_diagonal,
-                     self.inverse_cube)
-        if mobility is None:
-            return kernels.poisson_rows(*arguments)
-        return kernels.variable_density_poisson_rows(*arguments, mobility)
+                     self.inverse_cube, mobility)
+        # Room for the last step's entries and a little more: the count changes by well
+        # under a few percent a step. Room for every pair of the list only when that is
+        # short (the first step): that held 1.8 times the entries in 3D, and the matrix
+        # keeps its arrays alive.
+        for room in (self.expected_entries, None):
+            if room is None:
+                room = kernels.poisson_rows_room(indptr, row_number)
+            columns, values = np.empty(room, index_dtype), np.empty(room)
+            row_ptr, entries = kernels.poisson_rows_into(*arguments, columns, values)
+            if entries >= 0:
+                break
+        self.expected_entries = int(1.02 * entries) + 64
+        return row_ptr, columns[:entries], values[:entries]
 
 
 class HigherOrderLaplacian(StandardLaplacian):
