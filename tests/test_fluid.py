@@ -315,3 +315,50 @@ def test_a_preconditioner_is_renewed_once_a_solve_costs_more_than_the_average_si
     # Never more than the limit of reuses; a limit of 0 sets up every solve.
     assert not keep_preconditioner(50, 500, 1, 40.0, 50)
     assert not keep_preconditioner(0, 10, 1, 40.0, 0)
+
+
+def _chain_rows(n, shift):
+    """CSR rows of a chain's Laplacian plus ``shift`` on the diagonal (SPD), diagonal
+    first, global columns on one rank."""
+    indptr, columns, values = [0], [], []
+    for i in range(n):
+        neighbours = [j for j in (i - 1, i + 1) if 0 <= j < n]
+        columns += [i] + neighbours
+        values += [2.0 + shift] + [-1.0] * len(neighbours)
+        indptr.append(len(columns))
+    return np.array(indptr), np.array(columns, np.int32), np.array(values)
+
+
+def test_a_solve_that_reuses_the_preconditioner_lets_its_matrix_go_with_it():
+    """After a solve that reuses the preconditioner the KSP holds the matrix of the set-up
+    again (GAMG's finest smoother holds it anyway), so a step's matrix, and the arrays it
+    is made on, go when the step ends, not when the next step's matrix replaces it: one
+    matrix fewer alive at once (docs/performance.md, memory in 3D). The answers are the
+    equations'."""
+    import weakref
+
+    from mpi4py import MPI
+
+    from parmps import config, schema
+    with open(CASES / "hydrostatic.toml") as handle:
+        case = schema.validate(config.load_text(handle.read()))
+    solver = pressure.PressureSolver(MPI.COMM_SELF, case["pressure"])
+    n, alive = 60, []
+    for step, shift in enumerate((0.10, 0.11, 0.12)):
+        indptr, columns, values = _chain_rows(n, shift)
+        rhs = np.sin(np.arange(n))
+        matrix = np.zeros((n, n))
+        for row in range(n):
+            matrix[row, columns[indptr[row]:indptr[row + 1]]] = values[indptr[row]:indptr[row + 1]]
+        expected = np.linalg.solve(matrix, rhs)
+        alive.append(weakref.ref(values))
+        p, _, _ = solver.solve(indptr, columns, values, rhs, np.zeros(n), step, 0)
+        # CG stops at a residual of rtol 1e-6; the chain's condition number is about 40.
+        assert np.linalg.norm(p - expected) <= 1e-4 * np.linalg.norm(expected)
+        del indptr, columns, values
+    assert solver.setups == 1
+    operator = solver.ksp.getOperators()[0]
+    assert operator.handle == solver.setup_matrix.handle
+    # The set-up's values live on with its matrix; the later steps' are gone.
+    assert [ref() is not None for ref in alive] == [True, False, False]
+    solver.destroy()
