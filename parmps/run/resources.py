@@ -11,11 +11,17 @@ import os
 
 from parmps.core.settings import search_radius
 
-# Per particle: the fields (~80 bytes), a step's temporaries (~320 bytes), and per
-# neighbour within the search radius the pair index (8 bytes), its share of the pair
-# geometry and of the kernels' temporaries (24) and of the matrix entry (12 + 8).
-_BYTES_PER_PARTICLE = 400
-_BYTES_PER_PAIR = 52
+# Fitted to the peak resident memory of the dam breaks on 2 ranks (the interpreter and
+# libraries included; python -m parmps bench --ranks 2 --steps 10 --warmup 3, 2026-11-28):
+# 2D, 1.01 M particles, 43 lattice neighbours within the search radius: 3.53 kB a
+# particle; 3D (SPHERIC), 2.93 M particles, 212 neighbours: 6.79 kB. Per particle the
+# fields, the step's copies and temporaries and the solver's vectors and coarse levels;
+# per neighbour the pair index (8 bytes) and its share of the matrix entries (12 bytes
+# each, within the Laplacian's radius, in the step's matrix and the one the
+# preconditioner was set up on). The earlier 400 + 52 per neighbour put the 3D run at
+# 31 GiB, which refused it on a 23.5 GiB machine, and the 2D one 25 % low.
+_BYTES_PER_PARTICLE = 2700
+_BYTES_PER_PAIR = 20
 
 
 def particle_estimate(case):
