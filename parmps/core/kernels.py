@@ -736,15 +736,22 @@ def _laplacian_weight(r2, radius, inverse_cube):
 
 
 @numba.njit(cache=True, inline="always")
+def _pressure_rows(row_number, n_owned):
+    """How many of the owned particles have a row (a row number >= 0)."""
+    rows = 0
+    for i in range(n_owned):
+        if row_number[i] >= 0:
+            rows += 1
+    return rows
+
+
+@numba.njit(cache=True, inline="always")
 def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                   diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, d, columns, values):
     """The rows into ``columns`` and ``values`` (the caller's room); returns the row
     pointers and the entries written, or -1 for the entries when the room is too small."""
     n_owned = indptr.shape[0] - 1
-    n_rows = 0
-    for i in range(n_owned):
-        if row_number[i] >= 0:
-            n_rows += 1
+    n_rows = _pressure_rows(row_number, n_owned)
     room = columns.shape[0]
     row_ptr = np.zeros(n_rows + 1, np.int64)
     k = 0
@@ -811,11 +818,7 @@ def poisson_rows_room(indptr, row_number):
     """Entries the rows of :func:`poisson_rows_into` can hold at most: every pair of the
     list and a diagonal per row."""
     n_owned = indptr.shape[0] - 1
-    rows = 0
-    for i in range(n_owned):
-        if row_number[i] >= 0:
-            rows += 1
-    return indptr[n_owned] + rows
+    return indptr[n_owned] + _pressure_rows(row_number, n_owned)
 
 
 @numba.njit(cache=True)

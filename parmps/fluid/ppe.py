@@ -329,8 +329,7 @@ class PressureSolver:
         lets this one go now: one matrix fewer alive while the next is assembled and its
         preconditioner set up (3D at 3.1 l0: 12 bytes an entry, some 80 entries a row)."""
         if not reuse:
-            if self.setup_matrix is not None:
-                self.setup_matrix.destroy()
+            self._release_setup_matrix()
             self.setup_matrix = matrix
             return
         self.ksp.setOperators(self.setup_matrix)
