@@ -745,31 +745,48 @@ def _pressure_rows(row_number, n_owned):
     return rows
 
 
+@numba.njit(cache=True)
+def rows_in_index_order(row_number, n_owned):
+    """The owned particles with a row (a row number >= 0), in ascending index: the row
+    order of :func:`poisson_rows` when the row numbers ascend with the index."""
+    order = np.empty(_pressure_rows(row_number, n_owned), np.int64)
+    k = 0
+    for i in range(n_owned):
+        if row_number[i] >= 0:
+            order[k] = i
+            k += 1
+    return order
+
+
 @numba.njit(cache=True, inline="always")
 def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
-                  diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, d, columns, values):
-    """The rows into ``columns`` and ``values`` (the caller's room); returns the row
-    pointers and the entries written, or -1 for the entries when the room is too small."""
-    n_owned = indptr.shape[0] - 1
-    n_rows = _pressure_rows(row_number, n_owned)
+                  diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, d, columns, values,
+                  row_order):
+    """The rows of the particles ``row_order`` into ``columns`` and ``values`` (the caller's
+    room), in that order; returns the row pointers, where each row's diagonal is, and the
+    entries written, or -1 for the entries when the room is too small. The diagonal goes
+    before the row's first column of this rank above its own (the ranks' rows are
+    ``row_number[row_order[0]]`` on), so a row whose columns come ascending stays so."""
+    n_rows = row_order.shape[0]
     room = columns.shape[0]
     row_ptr = np.zeros(n_rows + 1, np.int64)
-    k = 0
+    diagonal_at = np.empty(n_rows, np.int64)
+    first = row_number[row_order[0]] if n_rows > 0 else 0
     place = 0
-    for i in range(n_owned):
-        if row_number[i] < 0:
-            continue
-        if place >= room:
-            return row_ptr, -1
-        start = place
-        columns[start] = row_number[i]
-        place += 1
+    for r in range(n_rows):
+        i = row_order[r]
+        own = row_number[i]
         if not is_unknown[i]:
-            values[start] = dirichlet_diagonal
-            k += 1
-            row_ptr[k] = place
+            if place >= room:
+                return row_ptr, diagonal_at, -1
+            columns[place] = own
+            values[place] = dirichlet_diagonal
+            diagonal_at[r] = place
+            place += 1
+            row_ptr[r + 1] = place
             continue
         diagonal = diagonal_shift
+        at = -1
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             if row_number[j] < 0:
@@ -781,36 +798,54 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
             pair = coefficient * w * (0.5 * (mobility[i] + mobility[j]))
             diagonal += pair
             if is_unknown[j]:
+                column = row_number[j]
+                if at < 0 and own < column < first + n_rows:
+                    if place >= room:
+                        return row_ptr, diagonal_at, -1
+                    at = place
+                    columns[place] = own
+                    place += 1
                 if place >= room:
-                    return row_ptr, -1
-                columns[place] = row_number[j]
+                    return row_ptr, diagonal_at, -1
+                columns[place] = column
                 values[place] = -pair
                 place += 1
-        values[start] = diagonal
-        k += 1
-        row_ptr[k] = place
-    return row_ptr, place
+        if at < 0:
+            if place >= room:
+                return row_ptr, diagonal_at, -1
+            at = place
+            columns[place] = own
+            place += 1
+        values[at] = diagonal
+        diagonal_at[r] = at
+        row_ptr[r + 1] = place
+    return row_ptr, diagonal_at, place
 
 
 @numba.njit(cache=True)
 def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                       diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, columns,
-                      values):
+                      values, row_order):
     """:func:`variable_density_poisson_rows` into the caller's ``columns`` (any integer
     type: PETSc's, so that the matrix takes them without a copy) and ``values``; returns
-    (row pointers, entries written), or -1 for the entries when the room is too small (a
-    row holds at most its pairs and its diagonal). Why a room: the one-pass assembly
+    (row pointers, each row's diagonal's place, entries written), or -1 for the entries
+    when the room is too small (a row holds at most its pairs and its diagonal). Why a room: the one-pass assembly
     into room for every pair of the list held 1.8 times the matrix's entries, and the
     matrix kept that room alive as long as it lived (3D, 3.1 l0: 8.2 M pairs for 4.6 M
-    entries at 100k particles)."""
+    entries at 100k particles).
+
+    ``row_order``: the owned particles with a row, in the order of their row numbers
+    (``row_number[row_order]`` ascends by one). Numbered in the neighbour search's cell
+    order, a row's columns come out ascending, its diagonal in its place
+    (:func:`parmps.core.neighbours.pair_list`, ``cell_order``)."""
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
         return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
                              coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
-                             mobility, 2, columns, values)
+                             mobility, 2, columns, values, row_order)
     return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                          diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, 3,
-                         columns, values)
+                         columns, values, row_order)
 
 
 @numba.njit(cache=True)
@@ -833,7 +868,8 @@ def poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffic
     Dirichlet neighbour has P_j = 0 and adds to the diagonal only. A Dirichlet
     row is ``dirichlet_diagonal`` * P_i = 0, decoupled, so the matrix keeps one
     size while particles reach and leave the surface and a preconditioner can
-    be reused across steps. Diagonal first in each row. The weight is the
+    be reused across steps. The diagonal before the row's first column of this rank
+    above it. The weight is the
     standard MPS weight w_ij = re/r - 1, or with ``inverse_cube`` Khayyer &
     Gotoh's higher-order Laplacian weight re/r^3 (docs/schemes.md, HL); both
     keep the pairs with 0 < r < re, so the sparsity is the same.
@@ -860,9 +896,10 @@ def variable_density_poisson_rows(indptr, cols, position, radius, row_number, is
     room = poisson_rows_room(indptr, row_number)
     columns = np.empty(room, np.int64)
     values = np.empty(room)
-    row_ptr, place = poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown,
-                                       coefficient, diagonal_shift, dirichlet_diagonal,
-                                       inverse_cube, mobility, columns, values)
+    row_ptr, _, place = poisson_rows_into(
+        indptr, cols, position, radius, row_number, is_unknown, coefficient, diagonal_shift,
+        dirichlet_diagonal, inverse_cube, mobility, columns, values,
+        rows_in_index_order(row_number, indptr.shape[0] - 1))
     return row_ptr, columns[:place], values[:place]
 
 
@@ -1145,6 +1182,20 @@ _SHELL_GAPS = np.array([701, 301, 132, 57, 23, 10, 4, 1], np.int64)
 _SHELL_FROM = 64
 
 
+# A row with at most one descent per this many entries is sorted by insertion alone.
+_NEARLY_SORTED = 8
+
+
+@numba.njit(cache=True, inline="always")
+def _descents(columns, start, end):
+    """How many entries of the row [start, end) are smaller than the one before."""
+    count = 0
+    for p in range(start + 1, end):
+        if columns[p] < columns[p - 1]:
+            count += 1
+    return count
+
+
 @numba.njit(cache=True)
 def sort_row_columns(row_ptr, columns, values):
     """Sort each CSR row's entries by column, in place: insertion sort, preceded for long rows
@@ -1155,13 +1206,21 @@ def sort_row_columns(row_ptr, columns, values):
     instead cost 10x more (14 ms against 1.1 ms for 6.8k rows). The neighbour lists come
     cell by cell, so a row is far from sorted in 3D (~120 entries): plain insertion took
     half the 3D solve's time on one rank (125 ms a step at 5.8M entries).
+
+    A row already ascending (the pressure rows numbered in the search's cell order) is
+    only read; a nearly ascending one (the same numbering kept while particles move) is
+    sorted by insertion alone, in about one pass.
     """
     for row in range(row_ptr.shape[0] - 1):
         start = row_ptr[row]
         length = row_ptr[row + 1] - start
+        descents = _descents(columns, start, start + length)
+        if descents == 0:
+            continue
+        nearly_sorted = descents * _NEARLY_SORTED <= length
         for gap in _SHELL_GAPS:
             # Short rows (2D, ~30 entries) are sorted faster by insertion alone.
-            if gap >= length or (gap > 1 and length < _SHELL_FROM):
+            if gap >= length or (gap > 1 and (length < _SHELL_FROM or nearly_sorted)):
                 continue
             for p in range(start + gap, start + length):
                 column = columns[p]

@@ -403,9 +403,14 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     # 100k particles), mostly the first touch of its fresh pages.
     csr = (indptr.astype(index_type, copy=False), columns.astype(index_type, copy=False),
            values.astype(PETSc.ScalarType, copy=False))
-    kernels.sort_row_columns(*csr)
     if comm.size > 1:
+        # Split first: numbered in the search's cell order, the owned block's rows are
+        # ascending but for the diagonal; the other block's are short.
         csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
+        for block in csr:
+            kernels.sort_row_columns(*block)
+    else:
+        kernels.sort_row_columns(*csr)
     matrix = PETSc.Mat().createAIJWithArrays(
         size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr, comm=comm)
     matrix.assemble()

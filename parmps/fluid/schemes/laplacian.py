@@ -36,8 +36,10 @@ class StandardLaplacian:
         self.dirichlet_diagonal = constants.laplacian_coefficient * constants.n0_laplacian
 
     def rows(self, indptr, cols, position, row_number, is_unknown, diagonal_shift,
-             mobility=None, index_dtype=np.int64):
-        """CSR (row pointers, global columns, values) of the owned rows with a pressure.
+             row_order, mobility=None, index_dtype=np.int64):
+        """CSR (row pointers, global columns, values) of the owned rows with a pressure, in
+        ``row_order`` (the particles in the order of their row numbers), and where each
+        row's diagonal is among its entries.
 
         ``mobility``: rho0/rho of every local particle where bodies' nodes take part
         in the solve (the implicit-pressure coupling), None for one density.
@@ -56,11 +58,12 @@ class StandardLaplacian:
             if room is None:
                 room = kernels.poisson_rows_room(indptr, row_number)
             columns, values = np.empty(room, index_dtype), np.empty(room)
-            row_ptr, entries = kernels.poisson_rows_into(*arguments, columns, values)
+            row_ptr, diagonal_at, entries = kernels.poisson_rows_into(
+                *arguments, columns, values, row_order)
             if entries >= 0:
                 break
         self.expected_entries = int(1.02 * entries) + 64
-        return row_ptr, columns[:entries], values[:entries]
+        return row_ptr, columns[:entries], values[:entries], diagonal_at
 
 
 class HigherOrderLaplacian(StandardLaplacian):
