@@ -38,15 +38,23 @@ class _Comm:
 
 
 class _Hydrostatic:
-    """Returns the field it is given and keeps the system it was asked to solve."""
+    """Returns the field it is given (one value per particle) in the rows' order and keeps
+    the system it was asked to solve."""
 
     index_dtype = np.dtype(np.int64)
 
-    def __init__(self, pressure):
-        self.pressure = pressure
+    def __init__(self, field):
+        self.field = field
+        self.fluid = None
+
+    def setup_due(self):
+        return True
 
     def solve(self, indptr, columns, values, rhs, guess, step_number, first_row):
         self.system = (indptr, columns, values, rhs)
+        # Row r is the particle row_order.order[r] (the search's cell order).
+        self.rows = self.fluid.row_order.order
+        self.pressure = self.field[self.rows]
         return self.pressure, 0, 0.0
 
 
@@ -63,11 +71,13 @@ def _residual(name, body_force):
     fluid = kind == FLUID
     surface = position[fluid, -1].max() + 0.5 * spacing
     floor = position[fluid, -1].min() - 0.5 * spacing
-    rows = np.flatnonzero(kind != DUMMY)
     g, density = -case["physics"]["gravity"][-1], case["fluid"]["density"]
-    solver = _Hydrostatic(density * g * (surface - position[rows, -1]))
-    FluidSolver(case, _Comm(), _Halo(), solver).step(particles, 1e-3, 0)
+    solver = _Hydrostatic(density * g * (surface - position[:, -1]))
+    solver.fluid = FluidSolver(case, _Comm(), _Halo(), solver)
+    solver.fluid.step(particles, 1e-3, 0)
     indptr, columns, values, rhs = solver.system
+    rows = solver.rows
+    assert np.array_equal(np.sort(rows), np.flatnonzero(kind != DUMMY))
     applied = np.add.reduceat(values * solver.pressure[columns], indptr[:-1])
     height = (position[rows, -1] - floor) / spacing
     # Columns three spacings or more inside the side walls: the floor's rows alone.

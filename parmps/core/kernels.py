@@ -829,10 +829,10 @@ def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, co
     """:func:`variable_density_poisson_rows` into the caller's ``columns`` (any integer
     type: PETSc's, so that the matrix takes them without a copy) and ``values``; returns
     (row pointers, each row's diagonal's place, entries written), or -1 for the entries
-    when the room is too small (a row holds at most its pairs and its diagonal). Why a room: the one-pass assembly
-    into room for every pair of the list held 1.8 times the matrix's entries, and the
-    matrix kept that room alive as long as it lived (3D, 3.1 l0: 8.2 M pairs for 4.6 M
-    entries at 100k particles).
+    when the room is too small (a row holds at most its pairs and its diagonal). Why a
+    room: the one-pass assembly into room for every pair of the list held 1.8 times the
+    matrix's entries, and the matrix kept that room alive as long as it lived (3D, 3.1 l0:
+    8.2 M pairs for 4.6 M entries at 100k particles).
 
     ``row_order``: the owned particles with a row, in the order of their row numbers
     (``row_number[row_order]`` ascends by one). Numbered in the neighbour search's cell
@@ -868,11 +868,11 @@ def poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffic
     Dirichlet neighbour has P_j = 0 and adds to the diagonal only. A Dirichlet
     row is ``dirichlet_diagonal`` * P_i = 0, decoupled, so the matrix keeps one
     size while particles reach and leave the surface and a preconditioner can
-    be reused across steps. The diagonal before the row's first column of this rank
-    above it. The weight is the
-    standard MPS weight w_ij = re/r - 1, or with ``inverse_cube`` Khayyer &
-    Gotoh's higher-order Laplacian weight re/r^3 (docs/schemes.md, HL); both
-    keep the pairs with 0 < r < re, so the sparsity is the same.
+    be reused across steps. The diagonal goes before the row's first column of this
+    rank above it. The weight is the standard MPS weight w_ij = re/r - 1, or with
+    ``inverse_cube`` Khayyer & Gotoh's higher-order Laplacian weight re/r^3
+    (docs/schemes.md, HL); both keep the pairs with 0 < r < re, so the sparsity is the
+    same.
     """
     return variable_density_poisson_rows(indptr, cols, position, radius, row_number,
                                          is_unknown, coefficient, diagonal_shift,

@@ -404,8 +404,8 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     csr = (indptr.astype(index_type, copy=False), columns.astype(index_type, copy=False),
            values.astype(PETSc.ScalarType, copy=False))
     if comm.size > 1:
-        # Split first: numbered in the search's cell order, the owned block's rows are
-        # ascending but for the diagonal; the other block's are short.
+        # Split first: numbered in the search's cell order, the owned block's rows come
+        # ascending, or nearly; the other block's columns are other ranks' numbers.
         csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
         for block in csr:
             kernels.sort_row_columns(*block)

@@ -112,10 +112,11 @@ class RowOrder:
 
     Numbered in the search's cell order, each row lists its columns in ascending order
     (the search visits the cells in ascending order), so the rows need no sort before
-    PETSc takes them: numbered by index, sorting them took a sixth of a 3D step at 3.1 l0. A kept preconditioner, though, was set up on the rows in their
-    order then: renumbered every step, it preconditions a permuted matrix (27 CG
-    iterations a step instead of 4 in 3D). Kept, the order drifts from the cells' as
-    particles move, and the rows come out nearly ascending.
+    PETSc takes them: numbered by index, sorting them took a sixth of a 3D step at
+    3.1 l0. A kept preconditioner, though, was set up on the rows in their order then:
+    renumbered every step, it preconditions a permuted matrix (27 CG iterations a step
+    instead of 4 in 3D). Kept, the order drifts from the cells' as particles move, and
+    the rows come out nearly ascending.
     """
 
     def __init__(self):
