@@ -749,13 +749,7 @@ def _pressure_rows(row_number, n_owned):
 def rows_in_index_order(row_number, n_owned):
     """The owned particles with a row (a row number >= 0), in ascending index: the row
     order of :func:`poisson_rows` when the row numbers ascend with the index."""
-    order = np.empty(_pressure_rows(row_number, n_owned), np.int64)
-    k = 0
-    for i in range(n_owned):
-        if row_number[i] >= 0:
-            order[k] = i
-            k += 1
-    return order
+    return np.flatnonzero(row_number[:n_owned] >= 0)
 
 
 @numba.njit(cache=True, inline="always")

@@ -296,7 +296,7 @@ class FluidSolver:
             surface_unknown &= ~dirichlet
         pressure_index = self.row_order.rows(
             s.cell_order, has_pressure, particles.id, n,
-            renumber=self.pressure_solver is None or self.pressure_solver.setup_due())
+            renumber=self.pressure_solver.setup_due())
         first_row = self.comm.exscan(len(pressure_index)) or 0
         row_number = np.full(len(particles), -1, np.int64)
         row_number[pressure_index] = first_row + np.arange(len(pressure_index))
