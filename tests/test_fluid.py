@@ -329,6 +329,10 @@ def _chain_rows(n, shift):
     return np.array(indptr), np.array(columns, np.int32), np.array(values)
 
 
+# One rank: no columns of other ranks.
+_NO_OTHER = (None, np.zeros(0, np.int32), np.zeros(0))
+
+
 def test_a_solve_that_reuses_the_preconditioner_lets_its_matrix_go_with_it():
     """After a solve that reuses the preconditioner the KSP holds the matrix of the set-up
     again (GAMG's finest smoother holds it anyway), so a step's matrix, and the arrays it
@@ -352,7 +356,7 @@ def test_a_solve_that_reuses_the_preconditioner_lets_its_matrix_go_with_it():
             matrix[row, columns[indptr[row]:indptr[row + 1]]] = values[indptr[row]:indptr[row + 1]]
         expected = np.linalg.solve(matrix, rhs)
         alive.append(weakref.ref(values))
-        p, _, _ = solver.solve(indptr, columns, values, rhs, np.zeros(n), step, 0)
+        p, _, _ = solver.solve((indptr, columns, values), _NO_OTHER, rhs, np.zeros(n), step)
         # CG stops at a residual of rtol 1e-6; the chain's condition number is about 40.
         assert np.linalg.norm(p - expected) <= 1e-4 * np.linalg.norm(expected)
         del indptr, columns, values

@@ -186,27 +186,94 @@ def test_poisson_rows_fill_a_room_of_the_solvers_integer_type_or_say_it_is_short
     arguments = (indptr, cols, position, radius, row_number, unknown, 860.0, 0.45, 7.0, False)
     row_ptr, columns, values = kernels.poisson_rows(*arguments)
     entries = len(columns)
-    assert entries < kernels.poisson_rows_room(indptr, row_number)
+    room, other_room = kernels.poisson_rows_room(indptr, cols, row_number)
+    assert entries < room and other_room == 0
     for room, written in ((entries, entries), (entries - 1, -1)):
         into_columns, into_values = np.empty(room, np.int32), np.empty(room)
-        into_ptr, _, got = kernels.poisson_rows_into(
-            *arguments, np.ones(n), into_columns, into_values,
-            kernels.rows_in_index_order(row_number, len(indptr) - 1))
+        into_ptr, _, _, got, other = kernels.poisson_rows_into(
+            *arguments, np.ones(n), into_columns, into_values, into_columns[:0],
+            into_values[:0], kernels.rows_in_index_order(row_number, len(indptr) - 1))
         assert got == written
         if got == entries:
+            assert other == 0
             np.testing.assert_array_equal(into_ptr, row_ptr)
             np.testing.assert_array_equal(into_columns, columns)
             np.testing.assert_array_equal(into_values, values)
     laplacian = StandardLaplacian({}, SimpleNamespace(
         laplacian_coefficient=860.0, n0_laplacian=7.0 / 860.0, re_laplacian=radius))
     for expected in (0, entries - 1, entries + 5):
-        laplacian.expected_entries = expected
+        laplacian.expected_entries = (expected, 0)
         got = laplacian.rows(indptr, cols, position, row_number, unknown, 0.45,
                              np.flatnonzero(~is_dummy), index_dtype=np.dtype(np.int32))
-        assert got[1].dtype == np.int32
-        for a, b in zip(got, (row_ptr, columns, values)):
+        assert got.owned[1].dtype == np.int32 and len(got.other[1]) == 0
+        for a, b in zip(got.owned, (row_ptr, columns, values)):
             np.testing.assert_array_equal(a, b)
-        assert laplacian.expected_entries >= entries
+        assert laplacian.expected_entries[0] >= entries
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_poisson_rows_split_into_this_ranks_columns_and_the_others(dimension):
+    """On one rank of several the rows come in PETSc's two blocks: the columns of the rank's
+    own rows numbered from its first row, the other ranks' global; together they are the
+    rows of the whole matrix, entry for entry, and the rank's own columns ascend where its
+    rows are numbered in the search's cell order. A block's room one entry short is
+    refused (-1) and the scheme assembles again into room for every pair."""
+    from types import SimpleNamespace
+
+    from parmps.fluid.schemes.laplacian import StandardLaplacian
+    grid = np.indices((9,) * dimension).reshape(dimension, -1).T * SPACING
+    position = grid + np.random.default_rng(5).normal(0, 0.05 * SPACING, grid.shape)
+    n = len(position)
+    # This rank owns the particles with x below the middle; the rest are its ghosts, whose
+    # rows (numbered first, as a rank before this one would) are another rank's.
+    mine = position[:, 0] < 4.0 * SPACING
+    order = np.concatenate([np.flatnonzero(mine), np.flatnonzero(~mine)])
+    position = position[order]
+    n_owned = int(mine.sum())
+    indptr, cols, cell_order = pair_list(position, 3.7 * SPACING, n_rows=n_owned,
+                                         cell_order=True)
+    rows = cell_order[cell_order < n_owned]
+    first = n - n_owned
+    row_number = np.empty(n, np.int64)
+    row_number[rows] = first + np.arange(n_owned)
+    row_number[n_owned:] = np.arange(n - n_owned)
+    unknown = np.ones(n, np.int8)
+    unknown[::7] = 0
+    arguments = (indptr, cols, position, 3.1 * SPACING, row_number, unknown, 860.0, 0.45, 7.0,
+                 False, np.ones(n))
+    whole_room = indptr[-1] + n_owned
+    whole_columns, whole_values = np.empty(whole_room, np.int64), np.empty(whole_room)
+    whole_ptr, _, _, entries, _ = kernels.poisson_rows_into(
+        *arguments, whole_columns, whole_values, whole_columns[:0], whole_values[:0], rows,
+        False)
+    room, other_room = kernels.poisson_rows_room(indptr, cols, row_number)
+    columns, values = np.empty(room, np.int32), np.empty(room)
+    other_columns, other_values = np.empty(other_room, np.int32), np.empty(other_room)
+    row_ptr, other_ptr, diagonal_at, owned_entries, other_entries = kernels.poisson_rows_into(
+        *arguments, columns, values, other_columns, other_values, rows)
+    assert other_entries > 0 and owned_entries + other_entries == entries
+    np.testing.assert_array_equal(columns[diagonal_at], np.arange(n_owned))
+    for r in range(n_owned):
+        a, b = row_ptr[r], row_ptr[r + 1]
+        c, d = other_ptr[r], other_ptr[r + 1]
+        # The other ranks' rows are numbered in their own order: that block is sorted later.
+        assert np.all(np.diff(columns[a:b]) > 0) and np.all(other_columns[c:d] < first)
+        joined = np.concatenate([columns[a:b] + first, other_columns[c:d]])
+        joined_values = np.concatenate([values[a:b], other_values[c:d]])
+        whole = slice(whole_ptr[r], whole_ptr[r + 1])
+        keep, keep_whole = np.argsort(joined), np.argsort(whole_columns[whole])
+        np.testing.assert_array_equal(joined[keep], whole_columns[whole][keep_whole])
+        np.testing.assert_array_equal(joined_values[keep], whole_values[whole][keep_whole])
+    short = kernels.poisson_rows_into(*arguments, columns, values,
+                                      other_columns[:other_entries - 1],
+                                      other_values[:other_entries - 1], rows)
+    assert short[3] == -1
+    laplacian = StandardLaplacian({}, SimpleNamespace(
+        laplacian_coefficient=860.0, n0_laplacian=7.0 / 860.0, re_laplacian=3.1 * SPACING))
+    laplacian.expected_entries = (owned_entries, other_entries - 1)
+    got = laplacian.rows(indptr, cols, position, row_number, unknown, 0.45, rows)
+    np.testing.assert_array_equal(got.other[1], other_columns[:other_entries])
+    np.testing.assert_array_equal(got.owned[2], values[:owned_entries])
 
 
 def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene):
@@ -444,10 +511,10 @@ def test_rows_numbered_in_the_searchs_cell_order_come_out_ascending(scene):
     unknown[::7] = 0
     arguments = (indptr, cols, position, 3.1 * SPACING, row_number, unknown, 860.0, 0.45, 7.0,
                  False, np.ones(n))
-    room = kernels.poisson_rows_room(indptr, row_number)
+    room, _ = kernels.poisson_rows_room(indptr, cols, row_number)
     columns, values = np.empty(room, np.int64), np.empty(room)
-    row_ptr, diagonal_at, entries = kernels.poisson_rows_into(*arguments, columns, values,
-                                                              rows)
+    row_ptr, _, diagonal_at, entries, _ = kernels.poisson_rows_into(
+        *arguments, columns, values, columns[:0], values[:0], rows)
     columns, values = columns[:entries], values[:entries]
     np.testing.assert_array_equal(columns[diagonal_at], np.arange(len(rows)))
     for r in range(len(rows)):
@@ -509,22 +576,6 @@ def test_sort_row_columns_sorts_each_row_with_its_values():
         part = columns[row_ptr[row]:row_ptr[row + 1]]
         assert np.all(np.diff(part) > 0)
     np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
-
-
-def test_split_owned_columns_gives_petsc_both_blocks_in_row_order():
-    # Rows 0-2 of a rank owning global columns 10-13; the other columns stay global.
-    row_ptr = np.array([0, 3, 3, 7], np.int32)
-    columns = np.array([2, 10, 13, 10, 11, 14, 20], np.int32)
-    values = np.arange(7.0)
-    (owned_ptr, owned_columns, owned_values), (other_ptr, other_columns, other_values) = \
-        kernels.split_owned_columns(row_ptr, columns, values, np.int32(10), 4)
-    np.testing.assert_array_equal(owned_ptr, [0, 2, 2, 4])
-    np.testing.assert_array_equal(owned_columns, [0, 3, 0, 1])
-    np.testing.assert_array_equal(owned_values, [1.0, 2.0, 3.0, 4.0])
-    np.testing.assert_array_equal(other_ptr, [0, 1, 1, 3])
-    np.testing.assert_array_equal(other_columns, [2, 14, 20])
-    np.testing.assert_array_equal(other_values, [0.0, 5.0, 6.0])
-    assert owned_ptr.dtype == row_ptr.dtype and owned_columns.dtype == columns.dtype
 
 
 def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are_identical(

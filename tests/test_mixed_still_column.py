@@ -50,8 +50,8 @@ class _Hydrostatic:
     def setup_due(self):
         return True
 
-    def solve(self, indptr, columns, values, rhs, guess, step_number, first_row):
-        self.system = (indptr, columns, values, rhs)
+    def solve(self, owned, other, rhs, guess, step_number):
+        self.system = (*owned, rhs)
         # Row r is the particle row_order.order[r] (the search's cell order).
         self.rows = self.fluid.row_order.order
         self.pressure = self.field[self.rows]

@@ -505,8 +505,8 @@ def test_higher_order_laplacian_rows_are_exact_or_paper_scaled_for_a_quadratic(n
     row_number = np.arange(n, dtype=np.int64)
     is_unknown = np.ones(n, np.int8)
     laplacian = HigherOrderLaplacian({"normalisation": normalisation}, constants)
-    row_ptr, columns, values, _ = laplacian.rows(indptr, cols, position, row_number,
-                                                 is_unknown, 0.0, np.arange(n))
+    row_ptr, columns, values = laplacian.rows(indptr, cols, position, row_number,
+                                              is_unknown, 0.0, np.arange(n)).owned
     field = (position ** 2).sum(axis=1)
     applied = np.array([values[row_ptr[i]:row_ptr[i + 1]]
                         @ field[columns[row_ptr[i]:row_ptr[i + 1]]] for i in range(n)])

@@ -755,29 +755,41 @@ def rows_in_index_order(row_number, n_owned):
 @numba.njit(cache=True, inline="always")
 def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                   diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, d, columns, values,
-                  row_order):
-    """The rows of the particles ``row_order`` into ``columns`` and ``values`` (the caller's
-    room), in that order; returns the row pointers, where each row's diagonal is, and the
-    entries written, or -1 for the entries when the room is too small. The diagonal goes
-    before the row's first column of this rank above its own (the ranks' rows are
-    ``row_number[row_order[0]]`` on), so a row whose columns come ascending stays so."""
+                  other_columns, other_values, row_order, split):
+    """The rows of the particles ``row_order`` into the caller's room, in that order.
+
+    The rank's rows are ``row_number[row_order[0]]`` (``first``) on. With ``split``, a
+    column of the rank's rows goes into ``columns``/``values`` numbered from ``first``
+    (local) and any other into ``other_columns``/``other_values`` (global): the two blocks
+    PETSc takes as they are. Without, every entry goes into the first, global.
+    Returns (row pointers of each block, where each row's diagonal is in the first,
+    entries written in each), with -1 for the entries when a room is too small. The
+    diagonal goes before the row's first column of the rank's rows above its own, so a
+    row whose columns come ascending stays so."""
     n_rows = row_order.shape[0]
-    room = columns.shape[0]
+    room, other_room = columns.shape[0], other_columns.shape[0]
     row_ptr = np.zeros(n_rows + 1, np.int64)
+    other_ptr = np.zeros(n_rows + 1, np.int64)
     diagonal_at = np.empty(n_rows, np.int64)
     first = row_number[row_order[0]] if n_rows > 0 else 0
+    last = first + n_rows
+    offset = first if split else 0
     place = 0
+    other = 0
+    # The room checks are written out at each entry: a helper for them, inlined, made the
+    # kernel 18 % slower (3D, 18 M pairs).
     for r in range(n_rows):
         i = row_order[r]
         own = row_number[i]
         if not is_unknown[i]:
             if place >= room:
-                return row_ptr, diagonal_at, -1
-            columns[place] = own
+                return row_ptr, other_ptr, diagonal_at, -1, -1
+            columns[place] = own - offset
             values[place] = dirichlet_diagonal
             diagonal_at[r] = place
             place += 1
             row_ptr[r + 1] = place
+            other_ptr[r + 1] = other
             continue
         diagonal = diagonal_shift
         at = -1
@@ -791,42 +803,58 @@ def _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coeffi
             # Mobility 1 for both (one density) gives exactly coefficient * w.
             pair = coefficient * w * (0.5 * (mobility[i] + mobility[j]))
             diagonal += pair
-            if is_unknown[j]:
-                column = row_number[j]
-                if at < 0 and own < column < first + n_rows:
-                    if place >= room:
-                        return row_ptr, diagonal_at, -1
-                    at = place
-                    columns[place] = own
-                    place += 1
+            if not is_unknown[j]:
+                continue
+            column = row_number[j]
+            if split and (column < first or column >= last):
+                if other >= other_room:
+                    return row_ptr, other_ptr, diagonal_at, -1, -1
+                other_columns[other] = column
+                other_values[other] = -pair
+                other += 1
+                continue
+            if at < 0 and own < column < last:
                 if place >= room:
-                    return row_ptr, diagonal_at, -1
-                columns[place] = column
-                values[place] = -pair
+                    return row_ptr, other_ptr, diagonal_at, -1, -1
+                at = place
+                columns[place] = own - offset
                 place += 1
+            if place >= room:
+                return row_ptr, other_ptr, diagonal_at, -1, -1
+            columns[place] = column - offset
+            values[place] = -pair
+            place += 1
         if at < 0:
             if place >= room:
-                return row_ptr, diagonal_at, -1
+                return row_ptr, other_ptr, diagonal_at, -1, -1
             at = place
-            columns[place] = own
+            columns[place] = own - offset
             place += 1
         values[at] = diagonal
         diagonal_at[r] = at
         row_ptr[r + 1] = place
-    return row_ptr, diagonal_at, place
+        other_ptr[r + 1] = other
+    return row_ptr, other_ptr, diagonal_at, place, other
 
 
 @numba.njit(cache=True)
 def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                       diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, columns,
-                      values, row_order):
-    """:func:`variable_density_poisson_rows` into the caller's ``columns`` (any integer
-    type: PETSc's, so that the matrix takes them without a copy) and ``values``; returns
-    (row pointers, each row's diagonal's place, entries written), or -1 for the entries
-    when the room is too small (a row holds at most its pairs and its diagonal). Why a
-    room: the one-pass assembly into room for every pair of the list held 1.8 times the
-    matrix's entries, and the matrix kept that room alive as long as it lived (3D, 3.1 l0:
-    8.2 M pairs for 4.6 M entries at 100k particles).
+                      values, other_columns, other_values, row_order, split=True):
+    """:func:`variable_density_poisson_rows` into the caller's room, in two blocks: the
+    columns of this rank's rows, numbered from its first (``columns``/``values``), and the
+    other ranks' columns, global (``other_columns``/``other_values``), or with ``split``
+    false every entry in the first, global. The columns may be of any integer type
+    (PETSc's, so that the matrix takes them without a copy). Returns (row pointers of
+    each block, each row's diagonal's place in the first, entries written in each), the
+    entries -1 when a room is too small (see :func:`poisson_rows_room`).
+
+    Why a room: the one-pass assembly into room for every pair of the list held 1.8 times
+    the matrix's entries, and the matrix kept that room alive as long as it lived (3D,
+    3.1 l0: 8.2 M pairs for 4.6 M entries at 100k particles). Why two blocks: PETSc takes
+    a distributed matrix's as they are (``MatCreateMPIAIJWithSplitArrays``); splitting the
+    rows afterwards cost a pass over every entry and a second copy of them (35 ms a step
+    a rank at 8.5 M entries on two ranks, 3D).
 
     ``row_order``: the owned particles with a row, in the order of their row numbers
     (``row_number[row_order]`` ascends by one). Numbered in the neighbour search's cell
@@ -836,18 +864,24 @@ def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, co
     if position.shape[1] == 2:
         return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
                              coefficient, diagonal_shift, dirichlet_diagonal, inverse_cube,
-                             mobility, 2, columns, values, row_order)
+                             mobility, 2, columns, values, other_columns, other_values,
+                             row_order, split)
     return _poisson_rows(indptr, cols, position, radius, row_number, is_unknown, coefficient,
                          diagonal_shift, dirichlet_diagonal, inverse_cube, mobility, 3,
-                         columns, values, row_order)
+                         columns, values, other_columns, other_values, row_order, split)
 
 
 @numba.njit(cache=True)
-def poisson_rows_room(indptr, row_number):
-    """Entries the rows of :func:`poisson_rows_into` can hold at most: every pair of the
-    list and a diagonal per row."""
+def poisson_rows_room(indptr, cols, row_number):
+    """Entries each block of :func:`poisson_rows_into` (split) can hold at most: this
+    rank's, every pair with an owned particle and a diagonal a row; the other ranks', every
+    pair with a ghost."""
     n_owned = indptr.shape[0] - 1
-    return indptr[n_owned] + _pressure_rows(row_number, n_owned)
+    to_ghosts = 0
+    for p in range(indptr[n_owned]):
+        if cols[p] >= n_owned:
+            to_ghosts += 1
+    return indptr[n_owned] - to_ghosts + _pressure_rows(row_number, n_owned), to_ghosts
 
 
 @numba.njit(cache=True)
@@ -887,13 +921,13 @@ def variable_density_poisson_rows(indptr, cols, position, radius, row_number, is
     changes with the sum. Symmetric, because m_ij is; with every m_i = 1 it is
     :func:`poisson_rows` exactly.
     """
-    room = poisson_rows_room(indptr, row_number)
+    room = indptr[indptr.shape[0] - 1] + _pressure_rows(row_number, indptr.shape[0] - 1)
     columns = np.empty(room, np.int64)
     values = np.empty(room)
-    row_ptr, _, place = poisson_rows_into(
+    row_ptr, _, _, place, _ = poisson_rows_into(
         indptr, cols, position, radius, row_number, is_unknown, coefficient, diagonal_shift,
-        dirichlet_diagonal, inverse_cube, mobility, columns, values,
-        rows_in_index_order(row_number, indptr.shape[0] - 1))
+        dirichlet_diagonal, inverse_cube, mobility, columns, values, columns[:0], values[:0],
+        rows_in_index_order(row_number, indptr.shape[0] - 1), False)
     return row_ptr, columns[:place], values[:place]
 
 
@@ -1226,42 +1260,3 @@ def sort_row_columns(row_ptr, columns, values):
                     q -= gap
                 columns[q + gap] = column
                 values[q + gap] = value
-
-
-@numba.njit(cache=True)
-def split_owned_columns(row_ptr, columns, values, first, n_owned):
-    """Split CSR rows with global columns into the owned block (columns first ..
-    first + n_owned - 1, renumbered from 0) and the rest (global columns kept), each
-    in the rows' order: (ptr, columns, values) of each.
-
-    PETSc takes the two blocks of a distributed matrix as they are
-    (``MatCreateMPIAIJWithSplitArrays``); given one CSR with global columns it inserts
-    every entry again and hashes the off-rank columns, which cost two ranks more
-    than the solve's own set-up of the matrix (8 ms a step at 20k rows a rank).
-    """
-    n_rows = row_ptr.shape[0] - 1
-    owned_count = 0
-    for p in range(row_ptr[n_rows]):
-        if first <= columns[p] < first + n_owned:
-            owned_count += 1
-    owned_ptr = np.zeros(n_rows + 1, row_ptr.dtype)
-    owned_columns = np.empty(owned_count, columns.dtype)
-    owned_values = np.empty(owned_count, values.dtype)
-    other_ptr = np.zeros(n_rows + 1, row_ptr.dtype)
-    other_columns = np.empty(row_ptr[n_rows] - owned_count, columns.dtype)
-    other_values = np.empty(row_ptr[n_rows] - owned_count, values.dtype)
-    a = 0
-    b = 0
-    for row in range(n_rows):
-        for p in range(row_ptr[row], row_ptr[row + 1]):
-            if first <= columns[p] < first + n_owned:
-                owned_columns[a] = columns[p] - first
-                owned_values[a] = values[p]
-                a += 1
-            else:
-                other_columns[b] = columns[p]
-                other_values[b] = values[p]
-                b += 1
-        owned_ptr[row + 1] = a
-        other_ptr[row + 1] = b
-    return (owned_ptr, owned_columns, owned_values), (other_ptr, other_columns, other_values)

@@ -280,15 +280,16 @@ class PressureSolver:
             self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
             self.setup_cost, self.reuse_limit)
 
-    def solve(self, indptr, columns, values, rhs, guess, step, first_row):
+    def solve(self, owned, other, rhs, guess, step):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
-        indptr/columns/values: CSR of the local rows with global column numbers;
-        ``first_row``: the global number of this rank's first row (the rows of the ranks
-        before it come first).
+        ``owned``, ``other``: the rows' two CSR blocks, each (row pointers, columns,
+        values): the columns of this rank's rows numbered from its first, and the other
+        ranks' columns, global (:func:`pressure_matrix`; the ranks' rows are numbered
+        rank after rank).
         """
         PETSc = self.PETSc
-        matrix, csr = pressure_matrix(PETSc, self.comm, indptr, columns, values, first_row)
+        matrix, csr = pressure_matrix(PETSc, self.comm, owned, other)
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
@@ -379,15 +380,19 @@ class PressureSolver:
         self._release_setup_matrix()
 
 
-def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
-    """This rank's rows (CSR, global column numbers, first row ``first_row``) as an
-    assembled PETSc matrix marked symmetric; returns (matrix, the CSR arrays it is made on).
-    Each row's entries are sorted by column in ``columns`` and ``values`` themselves when
-    their types are PETSc's (the caller's arrays change order).
+def pressure_matrix(PETSc, comm, owned, other):
+    """This rank's rows, in two CSR blocks (row pointers, columns, values), as an assembled
+    PETSc matrix marked symmetric; returns (matrix, the CSR arrays it is made on).
+
+    ``owned``: the columns of the rank's own rows, numbered from its first row; ``other``:
+    the other ranks' columns, global (no entries on one rank). Each row's entries are
+    sorted by column in the blocks' own arrays when their types are PETSc's (the caller's
+    arrays change order).
 
     Made on the CSR arrays themselves (sorted rows), not row by row: a tenth of the cost.
-    On one rank PETSc keeps the arrays without copying them (petsc4py keeps them with
-    the matrix, alive as long as it is).
+    PETSc keeps the arrays without copying them, on one rank as the matrix and on several
+    as its two blocks (``MatCreateMPIAIJWithSplitArrays``; petsc4py keeps them with the
+    matrix, alive as long as it is).
 
     Every Laplacian's rows are symmetric by construction (a pair's weight depends on its
     distance alone, and a row left out or held at P = 0 takes its column with it; checked
@@ -396,21 +401,25 @@ def pressure_matrix(PETSc, comm, indptr, columns, values, first_row):
     symmetrise it: a third of a set-up in 2D, a fifth in 3D. The flag is set after the
     assembly, which clears it.
     """
-    n_local = len(indptr) - 1
-    index_type = PETSc.IntType
-    # The arrays are taken as they are where their types are PETSc's (the values: float64),
-    # and sorted in place: a copy of the values cost 9-17 ms a step at 4.6M entries (3D,
-    # 100k particles), mostly the first touch of its fresh pages.
-    csr = (indptr.astype(index_type, copy=False), columns.astype(index_type, copy=False),
-           values.astype(PETSc.ScalarType, copy=False))
+
+    def petsc_types(block):
+        # Taken as they are where their types are PETSc's (the values: float64), and
+        # sorted in place: a copy of the values cost 9-17 ms a step at 4.6M entries (3D,
+        # 100k particles), mostly the first touch of its fresh pages.
+        row_ptr, columns, values = block
+        block = (row_ptr.astype(PETSc.IntType, copy=False),
+                 columns.astype(PETSc.IntType, copy=False),
+                 values.astype(PETSc.ScalarType, copy=False))
+        kernels.sort_row_columns(*block)
+        return block
+
+    n_local = len(owned[0]) - 1
     if comm.size > 1:
-        # Split first: numbered in the search's cell order, the owned block's rows come
-        # ascending, or nearly; the other block's columns are other ranks' numbers.
-        csr = kernels.split_owned_columns(*csr, index_type(first_row), n_local)
-        for block in csr:
-            kernels.sort_row_columns(*block)
+        csr = (petsc_types(owned), petsc_types(other))
+    elif len(other[1]):
+        raise ValueError("pressure_matrix: columns of other ranks on one rank")
     else:
-        kernels.sort_row_columns(*csr)
+        csr = petsc_types(owned)
     matrix = PETSc.Mat().createAIJWithArrays(
         size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr, comm=comm)
     matrix.assemble()

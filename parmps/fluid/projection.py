@@ -87,16 +87,14 @@ class PressureStep:
 
 @dataclass
 class PressureSystem:
-    """One step's pressure equation on one rank: CSR ``indptr``/``columns``/``values`` of
-    the rows in global numbering (``first_row`` is this rank's first), ``rhs``;
-    ``pressure_index``: the owned particles with a row, in row order; ``in_rows``: which
-    of those rows are unknowns (the rest are held at P = 0); ``has_pressure``: every local
+    """One step's pressure equation on one rank: its ``rows`` (the matrix's two blocks,
+    :class:`parmps.fluid.schemes.laplacian.PressureRows`; ``first_row`` is this rank's
+    first), ``rhs``; ``pressure_index``: the owned particles with a row, in row order;
+    ``in_rows``: which of those rows are unknowns (the rest are held at P = 0); ``has_pressure``: every local
     particle that carries a pressure; ``surface_gradient``: the free-surface scheme's
     terms for the gradient."""
 
-    indptr: np.ndarray
-    columns: np.ndarray
-    values: np.ndarray
+    rows: object
     rhs: np.ndarray
     pressure_index: np.ndarray
     in_rows: np.ndarray
@@ -306,7 +304,7 @@ class FluidSolver:
         self.decomposition.refresh([row_number, is_unknown])
 
         self.timers.start("assembly")
-        csr_indptr, columns, values, diagonal_at = self.laplacian.rows(
+        rows = self.laplacian.rows(
             s.indptr, s.cols, s.position_star, row_number, is_unknown,
             c.density * self.compressibility / s.dt ** 2, pressure_index, mobility,
             index_dtype=self.pressure_solver.index_dtype)
@@ -315,7 +313,7 @@ class FluidSolver:
         if extra_diagonal is not None:
             if mobility is not None:
                 extra_diagonal *= mobility[:n]
-            values[diagonal_at] += extra_diagonal[pressure_index]
+            rows.owned[2][rows.diagonal_at] += extra_diagonal[pressure_index]
         rhs = np.zeros(len(pressure_index))
         with_source = unknown[pressure_index]
         rhs[with_source] = self.source.rhs(PressureStep(
@@ -324,7 +322,7 @@ class FluidSolver:
             velocity_star=s.velocity_star, number_density=s.number_density,
             unknown_index=pressure_index[with_source], near_indptr=s.near_indptr,
             near_cols=s.near_cols, kind=kind, gravity=self.gravity, laplacian=self.laplacian))
-        return PressureSystem(csr_indptr, columns, values, rhs, pressure_index,
+        return PressureSystem(rows, rhs, pressure_index,
                               (unknown | surface_unknown)[pressure_index], first_row,
                               has_pressure, surface_gradient)
 
@@ -334,8 +332,7 @@ class FluidSolver:
         particles = s.particles
         guess = np.where(system.in_rows, particles.pressure[:s.n][system.pressure_index], 0.0)
         solution, iterations, residual = self.pressure_solver.solve(
-            system.indptr, system.columns, system.values, system.rhs, guess, step_number,
-            system.first_row)
+            system.rows.owned, system.rows.other, system.rhs, guess, step_number)
         self.last_iterations, self.last_residual = iterations, residual
 
         self.timers.start("operators")

@@ -1,7 +1,7 @@
 """Pressure Laplacians: the matrix of the PPE (docs/design.md §1.4, docs/schemes.md).
 
 Both assemble ``-<lap p>_i + (rho c/dt^2) p_i`` row by row with
-:func:`parmps.core.kernels.poisson_rows` over the Laplacian radius
+:func:`parmps.core.kernels.poisson_rows_into` over the Laplacian radius
 ``re_laplacian``; they differ in the pair weight and its normalisation:
 
 - ``standard``: Koshizuka & Oka's ``2d/(lambda0 n0) sum_j (p_j - p_i) w_ij``,
@@ -13,6 +13,8 @@ Both assemble ``-<lap p>_i + (rho c/dt^2) p_i`` row by row with
   standard one (docs/schemes.md, HL, for what each makes true).
 """
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from parmps.config import Key
@@ -22,11 +24,23 @@ from parmps.fluid.schemes.khayyer_gotoh import (HL_NORMALISATIONS,
                                                 lattice_sums)
 
 
+@dataclass
+class PressureRows:
+    """A rank's rows of the pressure matrix in two CSR blocks, each (row pointers, columns,
+    values): ``owned``, the columns of the rank's own rows numbered from its first row;
+    ``other``, the other ranks' columns, global (empty on one rank). ``diagonal_at``: where
+    each row's diagonal is among ``owned``'s entries."""
+
+    owned: tuple
+    other: tuple
+    diagonal_at: np.ndarray
+
+
 class StandardLaplacian:
     KEYS = {}
     inverse_cube = False
-    # The room for the next step's rows: this step's entries and a little more.
-    expected_entries = 0
+    # The room for the next step's rows in each block: this step's entries and a little more.
+    expected_entries = (0, 0)
 
     def __init__(self, settings, constants):
         self.constants = constants
@@ -37,9 +51,8 @@ class StandardLaplacian:
 
     def rows(self, indptr, cols, position, row_number, is_unknown, diagonal_shift,
              row_order, mobility=None, index_dtype=np.int64):
-        """CSR (row pointers, global columns, values) of the owned rows with a pressure, in
-        ``row_order`` (the particles in the order of their row numbers), and where each
-        row's diagonal is among its entries.
+        """The owned rows with a pressure, in ``row_order`` (the particles in the order of
+        their row numbers), as :class:`PressureRows`.
 
         ``mobility``: rho0/rho of every local particle where bodies' nodes take part
         in the solve (the implicit-pressure coupling), None for one density.
@@ -54,16 +67,20 @@ class StandardLaplacian:
         # under a few percent a step. Room for every pair of the list only when that is
         # short (the first step): that held 1.8 times the entries in 3D, and the matrix
         # keeps its arrays alive.
-        for room in (self.expected_entries, None):
-            if room is None:
-                room = kernels.poisson_rows_room(indptr, row_number)
+        for rooms in (self.expected_entries, None):
+            if rooms is None:
+                rooms = kernels.poisson_rows_room(indptr, cols, row_number)
+            room, other_room = rooms
             columns, values = np.empty(room, index_dtype), np.empty(room)
-            row_ptr, diagonal_at, entries = kernels.poisson_rows_into(
-                *arguments, columns, values, row_order)
+            other_columns, other_values = np.empty(other_room, index_dtype), np.empty(other_room)
+            row_ptr, other_ptr, diagonal_at, entries, other_entries = kernels.poisson_rows_into(
+                *arguments, columns, values, other_columns, other_values, row_order)
             if entries >= 0:
                 break
-        self.expected_entries = int(1.02 * entries) + 64
-        return row_ptr, columns[:entries], values[:entries], diagonal_at
+        self.expected_entries = (int(1.02 * entries) + 64, int(1.02 * other_entries) + 64)
+        return PressureRows((row_ptr, columns[:entries], values[:entries]),
+                            (other_ptr, other_columns[:other_entries],
+                             other_values[:other_entries]), diagonal_at)
 
 
 class HigherOrderLaplacian(StandardLaplacian):
