@@ -50,7 +50,7 @@ class _Hydrostatic:
     def setup_due(self):
         return True
 
-    def solve(self, owned, other, rhs, guess, step_number):
+    def solve(self, owned, other, rhs, guess, step_number, ids):
         self.system = (*owned, rhs)
         # Row r is the particle row_order.order[r] (the search's cell order).
         self.rows = self.fluid.row_order.order

@@ -28,6 +28,7 @@ import numpy as np
 from parmps.core import kernels
 from parmps.core.lattice import coupling_shells
 from parmps.errors import CaseError, RunFailure
+from parmps.fluid.relaid import RelaidPreconditioner
 
 log = logging.getLogger(__name__)
 
@@ -189,8 +190,16 @@ class PressureSolver:
         self.iterations_since_setup = 0
         self.last_iterations = 0
         self.setups = 0
-        # The matrix the preconditioner was last set up on (see solve).
+        # The matrix the preconditioner was last set up on (see solve), and the layout of
+        # its rows: their ids in row order on this rank and its first row.
         self.setup_matrix = None
+        self.setup_ids = None
+        self.setup_first = 0
+        # The ids of the rows the last solve had, and, while they are not the set-up's,
+        # the preconditioner that matches them to it and this step's KSP around it.
+        self.layout_ids = None
+        self.relaid = None
+        self.relaid_ksp = None
 
     def _check_types(self, command_line):
         """Refuse a KSP or PC type PETSc does not have, naming where it was given."""
@@ -280,22 +289,24 @@ class PressureSolver:
             self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
             self.setup_cost, self.reuse_limit)
 
-    def solve(self, owned, other, rhs, guess, step):
+    def solve(self, owned, other, rhs, guess, step, ids):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
         ``owned``, ``other``: the rows' two CSR blocks, each (row pointers, columns,
         values): the columns of this rank's rows numbered from its first, and the other
         ranks' columns, global (:func:`pressure_matrix`; the ranks' rows are numbered
-        rank after rank).
+        rank after rank). ``ids``: each row's identity (its particle's id), by which a
+        preconditioner kept from an earlier layout of the rows finds them.
         """
         PETSc = self.PETSc
         matrix, csr = pressure_matrix(PETSc, self.comm, owned, other)
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
-        self._fit_layout(matrix)
         reuse = not self.setup_due()
-        reason = self._solve_with(matrix, b, x, guess, reuse, report_unused=self.solves == 0)
+        ksp = self._fit_layout(matrix, np.asarray(ids), reuse)
+        reason = self._solve_with(ksp, matrix, b, x, guess, reuse,
+                                  report_unused=self.solves == 0)
         self.solves += 1
         if reason < 0 and reuse:
             # A preconditioner kept from earlier matrices can be indefinite for this one
@@ -303,9 +314,10 @@ class PressureSolver:
             # for this matrix before calling the step a failure. Every rank reuses or
             # not alike, so every rank takes this branch together.
             reuse = False
-            reason = self._solve_with(matrix, b, x, guess, reuse)
-        iterations = self.ksp.getIterationNumber()
-        residual = self.ksp.getResidualNorm()
+            ksp = self._fit_layout(matrix, np.asarray(ids), reuse)
+            reason = self._solve_with(ksp, matrix, b, x, guess, reuse)
+        iterations = ksp.getIterationNumber()
+        residual = ksp.getResidualNorm()
         solution = x.getArray().copy()
         self._count(iterations, reuse)
         self._keep_setup_matrix(matrix, reuse)
@@ -328,7 +340,9 @@ class PressureSolver:
         set-up, so it stays alive anyway; the KSP, though, held each step's matrix, and
         its arrays, until the next step's replaced it. Pointed back at the set-up's, it
         lets this one go now: one matrix fewer alive while the next is assembled and its
-        preconditioner set up (3D at 3.1 l0: 12 bytes an entry, some 80 entries a row)."""
+        preconditioner set up (3D at 3.1 l0: 12 bytes an entry, some 80 entries a row).
+        A KSP made for a later layout of the rows goes with it (a new one each step)."""
+        self._drop_relaid_ksp()
         if not reuse:
             self._release_setup_matrix()
             self.setup_matrix = matrix
@@ -341,27 +355,65 @@ class PressureSolver:
             self.setup_matrix.destroy()
             self.setup_matrix = None
 
-    def _fit_layout(self, matrix):
-        """A new KSP when any rank's rows changed (collective: every rank must rebuild it
-        together, or PETSc hangs): migration changed the layout, and a preconditioner
-        (GAMG) cannot change size, so it starts afresh."""
+    def _fit_layout(self, matrix, ids, reuse):
+        """The KSP for this solve; collective (every rank decides alike, or PETSc hangs).
+
+        Set up afresh (``reuse`` false): the KSP of the set-ups, made anew when the rows'
+        sizes changed (a preconditioner cannot change size), and the rows' ids kept as the
+        set-up's layout. Reused, on the layout of the set-up: that KSP. Reused on a layout
+        the rows have changed to since (migration, or a rank's rows numbered afresh): a KSP
+        of its own whose preconditioner is the set-up's, applied through the rows' ids
+        (:class:`parmps.fluid.relaid.RelaidPreconditioner`): the set-up the new layout
+        would otherwise force is left to the policy."""
+        moved = not np.array_equal(ids, self.layout_ids) if self.layout_ids is not None else True
+        if self.comm.allreduce(int(moved)) > 0:
+            self._drop_relaid()
+            self.layout_ids = ids.copy()
+            if reuse:
+                self.relaid = RelaidPreconditioner(
+                    self.PETSc, self.comm, self.ksp.getPC(), self.setup_matrix,
+                    self.setup_ids, self.setup_first, ids, matrix)
+        if reuse:
+            if self.relaid is None:
+                return self.ksp
+            self.relaid.use(matrix)
+            self.relaid_ksp = self._make_ksp()
+            pc = self.relaid_ksp.getPC()
+            pc.setType(self.PETSc.PC.Type.PYTHON)
+            pc.setPythonContext(self.relaid)
+            return self.relaid_ksp
+        self._drop_relaid()
         if self.comm.allreduce(int(matrix.getSizes() != self.sizes)) > 0:
             self.ksp.destroy()
             self._release_setup_matrix()
             self.ksp = self._make_ksp()
             self.sizes = matrix.getSizes()
-            self.fresh_iterations = None
+        self.layout_ids = ids.copy()
+        self.setup_ids = self.layout_ids
+        self.setup_first = matrix.getOwnershipRange()[0]
+        return self.ksp
 
-    def _solve_with(self, matrix, b, x, guess, reuse, report_unused=False):
+    def _drop_relaid_ksp(self):
+        if self.relaid_ksp is not None:
+            self.relaid_ksp.destroy()
+            self.relaid_ksp = None
+
+    def _drop_relaid(self):
+        self._drop_relaid_ksp()
+        if self.relaid is not None:
+            self.relaid.release()
+            self.relaid = None
+
+    def _solve_with(self, ksp, matrix, b, x, guess, reuse, report_unused=False):
         """One KSP solve from ``guess``, the preconditioner kept or set up afresh; returns
         PETSc's converged reason. The first solve sets the preconditioner up, which reads
         the rest of the options."""
-        self.ksp.getPC().setReusePreconditioner(reuse)
-        self.ksp.setOperators(matrix)
+        ksp.getPC().setReusePreconditioner(reuse)
+        ksp.setOperators(matrix)
         x.getArray()[:] = guess
         with self._options_inserted(report_unused=report_unused):
-            self.ksp.solve(b, x)
-        return self.ksp.getConvergedReason()
+            ksp.solve(b, x)
+        return ksp.getConvergedReason()
 
     def _count(self, iterations, reuse):
         """The reuse policy's tallies after a solve (``keep_preconditioner``)."""
@@ -376,6 +428,7 @@ class PressureSolver:
             self.setups += 1
 
     def destroy(self):
+        self._drop_relaid()
         self.ksp.destroy()
         self._release_setup_matrix()
 

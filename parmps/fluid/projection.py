@@ -332,7 +332,8 @@ class FluidSolver:
         particles = s.particles
         guess = np.where(system.in_rows, particles.pressure[:s.n][system.pressure_index], 0.0)
         solution, iterations, residual = self.pressure_solver.solve(
-            system.rows.owned, system.rows.other, system.rhs, guess, step_number)
+            system.rows.owned, system.rows.other, system.rhs, guess, step_number,
+            particles.id[system.pressure_index])
         self.last_iterations, self.last_residual = iterations, residual
 
         self.timers.start("operators")
