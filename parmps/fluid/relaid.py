@@ -44,7 +44,6 @@ class RelaidPreconditioner:
         self.unmatched = ~matched
         self.any_unmatched = comm.allreduce(int(self.unmatched.any())) > 0
         self.jacobi = matrix.createVecLeft() if self.any_unmatched else None
-        self.matched_count = comm.allreduce(int(matched.sum()))
 
     def use(self, matrix):
         """This step's matrix (the same layout): its diagonal for the unmatched rows."""
