@@ -42,8 +42,9 @@ class RelaidPreconditioner:
         for item in (to_new, to_old, x_new):
             item.destroy()
         self.unmatched = ~matched
-        self.any_unmatched = comm.allreduce(int(self.unmatched.any())) > 0
-        self.jacobi = matrix.createVecLeft() if self.any_unmatched else None
+        # A vector is made on every rank or none (collective).
+        any_unmatched = comm.allreduce(int(self.unmatched.any())) > 0
+        self.jacobi = matrix.createVecLeft() if any_unmatched else None
 
     def use(self, matrix):
         """This step's matrix (the same layout): its diagonal for the unmatched rows."""
