@@ -303,8 +303,9 @@ class PressureSolver:
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         b.getArray()[:] = rhs
+        ids = np.asarray(ids)
         reuse = not self.setup_due()
-        ksp = self._fit_layout(matrix, np.asarray(ids), reuse)
+        ksp = self._fit_layout(matrix, ids, reuse)
         reason = self._solve_with(ksp, matrix, b, x, guess, reuse,
                                   report_unused=self.solves == 0)
         self.solves += 1
@@ -314,7 +315,7 @@ class PressureSolver:
             # for this matrix before calling the step a failure. Every rank reuses or
             # not alike, so every rank takes this branch together.
             reuse = False
-            ksp = self._fit_layout(matrix, np.asarray(ids), reuse)
+            ksp = self._fit_layout(matrix, ids, reuse)
             reason = self._solve_with(ksp, matrix, b, x, guess, reuse)
         iterations = ksp.getIterationNumber()
         residual = ksp.getResidualNorm()

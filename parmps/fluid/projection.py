@@ -88,17 +88,15 @@ class PressureStep:
 @dataclass
 class PressureSystem:
     """One step's pressure equation on one rank: its ``rows`` (the matrix's two blocks,
-    :class:`parmps.fluid.schemes.laplacian.PressureRows`; ``first_row`` is this rank's
-    first), ``rhs``; ``pressure_index``: the owned particles with a row, in row order;
-    ``in_rows``: which of those rows are unknowns (the rest are held at P = 0); ``has_pressure``: every local
-    particle that carries a pressure; ``surface_gradient``: the free-surface scheme's
-    terms for the gradient."""
+    :class:`parmps.fluid.schemes.laplacian.PressureRows`), ``rhs``; ``pressure_index``: the
+    owned particles with a row, in row order; ``in_rows``: which of those rows are unknowns
+    (the rest are held at P = 0); ``has_pressure``: every local particle that carries a
+    pressure; ``surface_gradient``: the free-surface scheme's terms for the gradient."""
 
     rows: object
     rhs: np.ndarray
     pressure_index: np.ndarray
     in_rows: np.ndarray
-    first_row: int
     has_pressure: np.ndarray
     surface_gradient: object
 
@@ -323,8 +321,8 @@ class FluidSolver:
             unknown_index=pressure_index[with_source], near_indptr=s.near_indptr,
             near_cols=s.near_cols, kind=kind, gravity=self.gravity, laplacian=self.laplacian))
         return PressureSystem(rows, rhs, pressure_index,
-                              (unknown | surface_unknown)[pressure_index], first_row,
-                              has_pressure, surface_gradient)
+                              (unknown | surface_unknown)[pressure_index], has_pressure,
+                              surface_gradient)
 
     def _solve(self, s, system, step_number):
         """The pressure of every local particle (0 off the rows; ghosts refreshed)."""
