@@ -1114,18 +1114,21 @@ def surface_fitted_normals(indptr, cols, position, raw, on_surface, radius, n_ro
 
 
 @numba.njit(cache=True, inline="always")
-def _surface_depth(indptr, cols, position, i, is_surface, radius, normal, half_spacing,
-                   inverse_cube, d):
-    # How far the zero level lies from i along the outward normal: half a spacing
-    # beyond a free-surface particle; below the surface, half a spacing plus the
-    # free-surface neighbours' mean height above i, weighted as the sum weighs them.
-    if is_surface[i]:
-        return half_spacing
+def _surface_depth(indptr, cols, position, i, is_surface, draws_level, radius, normal,
+                   half_spacing, inverse_cube, d):
+    # How far the zero level lies from i along the outward normal: half a spacing plus
+    # the mean height above i of the free-surface particles that draw the level (the
+    # fluid's), weighted as the sum weighs them, those less than half a spacing above
+    # i counting 0 (i's own layer: its jitter does not lift the level). The same for a
+    # free-surface particle as below the surface: the layer under the top one sits at
+    # n*/n0 = 0.976 on a 2D lattice (re 2.3 l0), so jitter takes many of its particles
+    # for surface, and their level is still the top layer's. Walls above the water
+    # draw no level (counted, they had pulled it down beside a wall).
     depth = 0.0
     weight_sum = 0.0
     for p in range(indptr[i], indptr[i + 1]):
         j = cols[p]
-        if not is_surface[j]:
+        if not draws_level[j]:
             continue
         r2 = pair_distance2(position, i, j, d)
         w = _laplacian_weight(r2, radius, inverse_cube)
@@ -1134,16 +1137,18 @@ def _surface_depth(indptr, cols, position, i, is_surface, radius, normal, half_s
         height = 0.0
         for k in range(d):
             height += pair_component(position, i, j, k) * normal[k]
-        depth += w * max(height, 0.0)
+        if height > half_spacing:
+            depth += w * height
         weight_sum += w
     if weight_sum <= 0.0:
-        return -1.0
+        return half_spacing if is_surface[i] else -1.0
     return half_spacing + depth / weight_sum
 
 
 @numba.njit(cache=True, inline="always")
-def _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface, normal,
-                            inverse_cube, half_spacing, undirected, n_rows, d):
+def _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
+                            draws_level, normal, inverse_cube, half_spacing, undirected,
+                            n_rows, d):
     extra = np.zeros(n_rows)
     for i in range(n_rows):
         if not is_unknown[i]:
@@ -1161,16 +1166,17 @@ def _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surfa
                 continue
             for k in range(d):
                 moment -= w * pair_component(position, i, j, k) * normal[i, k]
-        depth = _surface_depth(indptr, cols, position, i, is_surface, radius, normal[i],
-                               half_spacing, inverse_cube, d)
+        depth = _surface_depth(indptr, cols, position, i, is_surface, draws_level, radius,
+                               normal[i], half_spacing, inverse_cube, d)
         if depth > 0.0 and moment > 0.0:
             extra[i] = moment / depth
     return extra
 
 
 @numba.njit(cache=True)
-def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface, normal,
-                           inverse_cube, half_spacing, undirected, n_rows):
+def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
+                           draws_level, normal, inverse_cube, half_spacing, undirected,
+                           n_rows):
     """Per owned row, the diagonal the missing neighbours add when the pressure is zero
     half a spacing beyond the free-surface particles (before the Laplacian's coefficient).
 
@@ -1184,9 +1190,12 @@ def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surfac
     so the missing ones add ``-P_i |V_i| / delta_i`` to the row's sum: the diagonal
     only, and the matrix stays symmetric (Gibou et al. 2002's ghost-fluid Dirichlet
     condition, with the kernel's moment in place of the grid's). ``delta_i`` is
-    half a spacing for a surface particle; below the surface, half a spacing plus
-    the surface particles' mean height above i along the normal. A linear field
-    that is zero on that surface satisfies every such row exactly.
+    half a spacing plus the mean height above i, along the normal, of the
+    free-surface particles ``draws_level`` (every local particle: the fluid's), those
+    less than half a spacing above i counting 0: half a spacing for a particle of
+    the top layer, and for a particle below it taken for surface (as jitter takes
+    many of the second layer's) the top layer's level still. A linear field that
+    is zero on that surface satisfies every such row exactly.
 
     A free-surface row whose missing neighbours have no direction (it has no
     neighbour, or neighbours all round, as in a sheet one particle thick) gets
@@ -1197,10 +1206,11 @@ def surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surfac
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
         return _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
-                                       normal, inverse_cube, half_spacing, undirected, n_rows,
-                                       2)
+                                       draws_level, normal, inverse_cube, half_spacing,
+                                       undirected, n_rows, 2)
     return _surface_ghost_diagonal(indptr, cols, position, radius, is_unknown, is_surface,
-                                   normal, inverse_cube, half_spacing, undirected, n_rows, 3)
+                                   draws_level, normal, inverse_cube, half_spacing, undirected,
+                                   n_rows, 3)
 
 
 # Ciura's gaps for Shell sort, largest first, for rows of at least _SHELL_FROM entries

@@ -74,14 +74,17 @@ class ExtrapolatedSurface(DirichletSurface):
     def terms(self, indptr, cols, position, is_unknown, moving, laplacian, n_rows):
         c = self.constants
         is_surface = is_unknown == kernels.SURFACE_ROW
+        # The fluid's own surface draws the normals and the level; a wall that rises above
+        # the water is not where the water ends.
+        fluid_surface = is_surface & moving
         raw = kernels.surface_normals(indptr, cols, position, is_surface, c.re_laplacian, n_rows)
-        normal = kernels.surface_fitted_normals(indptr, cols, position, raw, is_surface & moving,
+        normal = kernels.surface_fitted_normals(indptr, cols, position, raw, fluid_surface,
                                                 c.re_laplacian, n_rows)
         diagonal = laplacian.coefficient * kernels.surface_ghost_diagonal(
-            indptr, cols, position, c.re_laplacian, is_unknown != 0, is_surface, normal,
-            laplacian.inverse_cube, 0.5 * c.spacing,
+            indptr, cols, position, c.re_laplacian, is_unknown != 0, is_surface, fluid_surface,
+            normal, laplacian.inverse_cube, 0.5 * c.spacing,
             laplacian.dirichlet_diagonal / laplacian.coefficient, n_rows)
         # Only the fluid's own surface: a body's face to the air keeps P = 0 on its nodes,
         # and the load on it is measured with the gradient's own limit.
-        corrected = (is_surface[:n_rows] & moving[:n_rows], normal, self.eigenvalue_limit)
+        corrected = (fluid_surface[:n_rows], normal, self.eigenvalue_limit)
         return diagonal, corrected
