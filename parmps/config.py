@@ -69,7 +69,17 @@ class Key:
             raise CaseError(f"{name} must be <= {self.le}, got {value}")
 
 
-class PerDimension:
+class DimensionDefault:
+    """A default that depends on the case's dimension: called with d, it gives the value."""
+
+    def __call__(self, dimension):
+        raise NotImplementedError
+
+    def __repr__(self):
+        return f"{self(2)} in 2D, {self(3)} in 3D"
+
+
+class PerDimension(DimensionDefault):
     """A vector default that depends on the case's dimension: ``PerDimension(last)`` is
     d - 1 zeros followed by ``last`` (a zero vector, or gravity along -z in 3D, -y in 2D)."""
 
@@ -79,8 +89,15 @@ class PerDimension:
     def __call__(self, dimension):
         return [0.0] * (dimension - 1) + [self.last]
 
-    def __repr__(self):
-        return f"{self(2)} in 2D, {self(3)} in 3D"
+
+class ByDimension(DimensionDefault):
+    """A scalar default measured for each dimension: ``ByDimension(in_2d, in_3d)``."""
+
+    def __init__(self, in_2d, in_3d):
+        self.values = {2: in_2d, 3: in_3d}
+
+    def __call__(self, dimension):
+        return self.values[dimension]
 
 
 # The zero vector of the case's dimension: the default of velocities.
@@ -189,7 +206,7 @@ def _validate_table(name, keys, raw, replaced=None, dimension=2):
             out[key] = _validate_table(full, spec.keys, {}, dimension=dimension)
         elif spec.default is REQUIRED:
             raise CaseError(f"missing key '{full}'")
-        elif isinstance(spec.default, PerDimension):
+        elif isinstance(spec.default, DimensionDefault):
             out[key] = spec.default(dimension)
         else:
             # Copy list defaults so no two cases share one mutable object.

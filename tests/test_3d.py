@@ -39,6 +39,11 @@ def test_the_dimension_comes_from_the_domain_and_sets_the_vector_defaults():
     assert case["tank"][0]["velocity"] == [0.0, 0.0, 0.0]
     two = _validate((CASES / "hydrostatic.toml").read_text())
     assert two["dimension"] == 2 and two["physics"]["gravity"] == [0.0, -9.81]
+    # The Laplacian's radius, measured for each dimension (docs/performance.md); a case's own
+    # value holds in either.
+    assert case["mps"]["re_laplacian"] == 2.3 and two["mps"]["re_laplacian"] == 3.1
+    own = _validate(TANK_3D + "\n[mps]\nre_laplacian = 3.1\n")
+    assert own["mps"]["re_laplacian"] == 3.1
 
 
 @pytest.mark.parametrize("old, new, message", [
@@ -137,9 +142,12 @@ def test_check_prints_the_3d_reference_values(tmp_path):
     summary = json.loads(result.stdout)
     assert summary["dimension"] == 3
     assert summary["particles"]["fluid"] == 10 * 10 * 10
-    # The cubic lattice within 3.1 l0: n0 = 54.32, lambda0 / l0^2 = 3.243 (DESIGN §7.2).
-    assert summary["n0_laplacian"] == pytest.approx(54.32, abs=0.005)
-    assert summary["lambda0"] / 0.02 ** 2 == pytest.approx(3.243, abs=0.001)
+    # The Laplacian's radius is 2.3 l0 in 3D by default (3.1 in 2D), the number density's:
+    # the cubic lattice within it has n0 = 19.53 and lambda0 / l0^2 = 1.932 (at 3.1 l0:
+    # 54.32 and 3.243, DESIGN §7.2).
+    assert summary["radii"]["laplacian"] == 2.3
+    assert summary["n0_laplacian"] == pytest.approx(19.53, abs=0.005)
+    assert summary["lambda0"] / 0.02 ** 2 == pytest.approx(1.932, abs=0.001)
     n0, _ = lattice.reference_values(1.0, summary["radii"]["number_density"], 3)
     assert summary["n0"] == pytest.approx(n0, rel=1e-12)
     assert summary["dt_limits"]["dt_max"] == pytest.approx(1e-3)

@@ -24,9 +24,10 @@ def test_the_reference_lists_every_key_with_type_default_and_allowed_values():
         assert (f"## `[[{name}]]`" if section.many else f"## `[{name}]`") in page
     rows = [line for line in page.splitlines() if line.startswith("| `")]
     assert len(rows) == len(list(casedoc.walk(schema.SECTIONS)))
-    # One row read back: [mps] re_laplacian is a float in l0, 3.1 by default, in (1, 5].
+    # One row read back: [mps] re_laplacian is a float in l0, 3.1 by default in 2D and 2.3
+    # in 3D, in (1, 5].
     (row,) = [r for r in rows if r.startswith("| `re_laplacian` |")]
-    assert row.split(" | ")[1:5] == ["`float`", "l0", "`3.1`", "> 1.0, ≤ 5.0"]
+    assert row.split(" | ")[1:5] == ["`float`", "l0", "`3.1 in 2D, 2.3 in 3D`", "> 1.0, ≤ 5.0"]
 
 
 def test_any_type_string_is_rendered_as_it_is():
