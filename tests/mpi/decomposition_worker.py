@@ -30,7 +30,10 @@ from parmps.core.particles import DUMMY, FLUID, WALL, Particles
 from parmps.parallel.mpi import abort_on_exception, agree, assert_all
 
 SPACING = 1.0
-HALO = (3.1 + 0.6) * SPACING  # the default re_laplacian + halo_skin
+# The checks' Laplacian radius, set in every case whatever the dimension's default (2.3 l0 in
+# 3D): the halo is it plus the default halo_skin.
+RE_LAPLACIAN = 3.1
+HALO = (RE_LAPLACIAN + 0.6) * SPACING
 
 # name -> (decomposition, dimension, the domain's extent across x (y, and z in 3D)).
 # The blocks' domains are square enough for the rank grid to cut y (and z).
@@ -39,7 +42,7 @@ SETUPS = {"slabs": ("slabs", 2, 10.0), "blocks": ("blocks", 2, 30.0),
 
 
 def make_case(lower_x, upper_x, setup="slabs", **parallel):
-    """A case with the default halo; strict migration (no margin) unless asked."""
+    """A case whose halo is HALO (any dimension); strict migration (no margin) unless asked."""
     name, dimension, across = SETUPS[setup]
     parallel.setdefault("migration_margin", 0.0)
     parallel["decomposition"] = name
@@ -47,6 +50,7 @@ def make_case(lower_x, upper_x, setup="slabs", **parallel):
         "domain": {"lower": [lower_x] + [0.0] * (dimension - 1),
                    "upper": [upper_x] + [across] * (dimension - 1)},
         "particles": {"spacing": SPACING},
+        "mps": {"re_laplacian": RE_LAPLACIAN},
         "time": {"end": 1.0},
         "parallel": parallel,
     })
@@ -187,7 +191,7 @@ def check_halo(comm, setup):
                                         global_scene.arrays[name][halo.id[n:]]),
                    f"ghost field {name} differs from its owner's")
     # Completeness: every particle within re_laplacian of an owned one is here.
-    radius = 3.1 * SPACING
+    radius = RE_LAPLACIAN * SPACING
     local = set(halo.id.tolist())
     position = global_scene.position
     missing = 0
@@ -583,7 +587,7 @@ def check_lazy_migration(comm, setup):
     # The halo covers every neighbour of the strays too.
     halo = decomposition.build_halo(mine)
     local = set(halo.id.tolist())
-    reach = 3.1 * SPACING
+    reach = RE_LAPLACIAN * SPACING
     missing = 0
     for start in range(0, halo.n_owned, 256):
         block = halo.position[start:min(start + 256, halo.n_owned)]
