@@ -10,9 +10,9 @@ def _mps_section():
     keys = {
         "re_number_density": Key("float", 2.3, gt=1.0, le=5.0,
                                  doc="radius for number density and gradient, in l0"),
-        # Measured in 3D (docs/performance.md, "The Laplacian's radius in 3D"): 2.3 l0 holds
-        # 56 neighbours against 3.1's 122 and halves the step's cost; the still tank, the
-        # SPHERIC sensors and the plate under water read as at 3.1.
+        # Measured in 3D (docs/performance.md, "The free surface's level, and 2.3 l0 as 3D's
+        # default radius"): 2.3 l0 holds 56 neighbours against 3.1's 122 and halves the step's
+        # cost; there the still tank meets every target, SPHERIC and the plate as at 3.1.
         "re_laplacian": Key("float", ByDimension(3.1, 2.3), gt=1.0, le=5.0,
                             doc="radius for the Laplacian and the viscous term, in l0"),
         "surface_threshold": Key("float", 0.97, gt=0.0, lt=1.0,
