@@ -1,4 +1,5 @@
-"""Shared helpers: run parmps as a user would, serially or under mpirun, with a timeout."""
+"""Shared helpers: run parmps as a user would, serially or under mpirun, with a timeout;
+stand-ins for a decomposition and a communicator to run one fluid step without MPI."""
 
 import re
 import subprocess
@@ -65,3 +66,21 @@ def pytest_collection_modifyitems(config, items):
     handed out last would leave the other process idle while it runs."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
     items.sort(key=lambda item: item.path not in slow_files)
+
+
+class NoHalo:
+    """A decomposition's ghost refresh on one rank with no ghosts, for a fluid step run
+    without MPI."""
+
+    def refresh(self, arrays):
+        pass
+
+
+class OneRank:
+    """The communicator calls a fluid step makes, on one rank, without MPI."""
+
+    rank = 0
+
+    def exscan(self, value):
+        return 0
+

@@ -609,6 +609,18 @@ def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are
     assert np.array_equal(full, near)
 
 
+@pytest.mark.parametrize("expected_pairs", [0, 1, 500, 10 ** 6])
+def test_pairs_within_is_the_same_whatever_room_it_is_given(scene, expected_pairs):
+    position, _, _, _, n, indptr, cols, _ = scene
+    radius = 2.1 * SPACING
+    exact_indptr, exact_cols = kernels.pairs_within(indptr, cols, position, radius, n)
+    got_indptr, got_cols = kernels.pairs_within(indptr, cols, position, radius, n,
+                                                expected_pairs=expected_pairs)
+    assert np.array_equal(got_indptr, exact_indptr)
+    assert np.array_equal(got_cols, exact_cols)
+    assert 0 < len(exact_cols) < indptr[n]
+
+
 def test_pairs_within_keeps_a_pair_a_rounding_error_inside_the_radius():
     # |r| = 0.3 exactly cannot be held in binary: sqrt(r^2) and r^2 against radius^2
     # may disagree in the last bit, and the sub-list must keep the pair either way.

@@ -18,24 +18,13 @@ import os
 import numpy as np
 import pytest
 
+from conftest import NoHalo, OneRank
 from parmps import config, schema
 from parmps.core import scene
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.fluid.projection import FluidSolver
 
 CASES = os.path.join(os.path.dirname(__file__), os.pardir, "cases")
-
-
-class _Halo:
-    def refresh(self, arrays):
-        pass
-
-
-class _Comm:
-    rank = 0
-
-    def exscan(self, value):
-        return 0
 
 
 class _Hydrostatic:
@@ -74,7 +63,7 @@ def _residual(name, body_force):
     floor = position[fluid, -1].min() - 0.5 * spacing
     g, density = -case["physics"]["gravity"][-1], case["fluid"]["density"]
     solver = _Hydrostatic(density * g * (surface - position[:, -1]))
-    solver.fluid = FluidSolver(case, _Comm(), _Halo(), solver)
+    solver.fluid = FluidSolver(case, OneRank(), NoHalo(), solver)
     solver.fluid.step(particles, 1e-3, 0)
     indptr, columns, values, rhs = solver.system
     rows = solver.rows

@@ -182,6 +182,7 @@ class FluidSolver:
         self.last_iterations = 0
         self.last_residual = 0.0
         self.expected_pairs = 0
+        self.expected_cut = {"wide": 0, "narrow": 0}
         self.row_order = RowOrder()
 
     def rows_may_move(self):
@@ -266,15 +267,35 @@ class FluidSolver:
         """n* at the predicted positions and the free surface it marks."""
         self.timers.start("operators")
         c = self.constants
-        # The sums on the number density's radius at the predicted positions (n*, the
-        # sources' divergence, the gradient) over the pairs within it: a third of the list.
-        s.near_indptr, s.near_cols = kernels.pairs_within(s.indptr, s.cols, s.position_star,
-                                                          c.re_number_density, s.n)
+        self._cut_sub_lists(s)
         s.number_density, neighbour_count = kernels.number_density(
             s.near_indptr, s.near_cols, s.position_star, c.re_number_density, s.n)
         s.surface = s.number_density < self.surface_threshold * c.n0
         if self.neighbour_threshold > 0.0:
             s.surface |= neighbour_count < self.neighbour_threshold * c.neighbour_count0
+
+    def _cut_sub_lists(self, s):
+        """The pairs within the number density's radius (n*, the sources' divergence, the
+        gradient: ``s.near_*``) and within the Laplacian's (the matrix and the free
+        surface's terms: ``s.laplacian_*``) at the predicted positions. The wider is cut
+        from the search's list, the narrower from it; one list serves both when the radii
+        are the same (3D's defaults). Each sum over a sub-list is bit for bit the sum over
+        the search's list, whose skin holds the pairs a step may bring within a radius."""
+        c = self.constants
+        wide, narrow = max(c.re_number_density, c.re_laplacian), \
+            min(c.re_number_density, c.re_laplacian)
+        cut = {wide: self._cut(s.indptr, s.cols, s.position_star, wide, s.n, "wide")}
+        if narrow < wide:
+            cut[narrow] = self._cut(*cut[wide], s.position_star, narrow, s.n, "narrow")
+        s.near_indptr, s.near_cols = cut[c.re_number_density]
+        s.laplacian_indptr, s.laplacian_cols = cut[c.re_laplacian]
+
+    def _cut(self, indptr, cols, position, radius, n, name):
+        sub = kernels.pairs_within(indptr, cols, position, radius, n,
+                                   expected_pairs=self.expected_cut[name])
+        # Room for the next step's cut in one pass, as for the search.
+        self.expected_cut[name] = int(1.05 * len(sub[1])) + 64
+        return sub
 
     def _pressure_system(self, s, dirichlet, mobility):
         """The pressure equation's rows on this rank: which particles are unknowns, the
@@ -302,27 +323,37 @@ class FluidSolver:
         self.decomposition.refresh([row_number, is_unknown])
 
         self.timers.start("assembly")
-        rows = self.laplacian.rows(
-            s.indptr, s.cols, s.position_star, row_number, is_unknown,
-            c.density * self.compressibility / s.dt ** 2, pressure_index, mobility,
-            index_dtype=self.pressure_solver.index_dtype)
-        extra_diagonal, surface_gradient = self.free_surface.terms(
-            s.indptr, s.cols, s.position_star, is_unknown, self.moving(kind), self.laplacian, n)
-        if extra_diagonal is not None:
-            if mobility is not None:
-                extra_diagonal *= mobility[:n]
-            rows.owned[2][rows.diagonal_at] += extra_diagonal[pressure_index]
-        rhs = np.zeros(len(pressure_index))
         with_source = unknown[pressure_index]
+        rhs = np.zeros(len(pressure_index))
         rhs[with_source] = self.source.rhs(PressureStep(
             dt=s.dt, n_owned=n, indptr=s.indptr, cols=s.cols, position=particles.position,
             velocity=particles.velocity, position_star=s.position_star,
             velocity_star=s.velocity_star, number_density=s.number_density,
             unknown_index=pressure_index[with_source], near_indptr=s.near_indptr,
             near_cols=s.near_cols, kind=kind, gravity=self.gravity, laplacian=self.laplacian))
+        self._let_search_list_go(s)
+        rows = self.laplacian.rows(
+            s.laplacian_indptr, s.laplacian_cols, s.position_star, row_number, is_unknown,
+            c.density * self.compressibility / s.dt ** 2, pressure_index, mobility,
+            index_dtype=self.pressure_solver.index_dtype)
+        extra_diagonal, surface_gradient = self.free_surface.terms(
+            s.laplacian_indptr, s.laplacian_cols, s.position_star, is_unknown,
+            self.moving(kind), self.laplacian, n)
+        if extra_diagonal is not None:
+            if mobility is not None:
+                extra_diagonal *= mobility[:n]
+            rows.owned[2][rows.diagonal_at] += extra_diagonal[pressure_index]
         return PressureSystem(rows, rhs, pressure_index,
                               (unknown | surface_unknown)[pressure_index], has_pressure,
                               surface_gradient)
+
+    def _let_search_list_go(self, s):
+        """Drop the search's pair list once the source has read it (at the start of the
+        step's positions), unless the shift reads it after the correction: the sub-lists
+        cut from it serve the rest, and without it the matrix, the step's largest
+        allocation, is assembled beside about half the pairs in 3D (docs/performance.md)."""
+        if not self.shifting.active:
+            s.indptr = s.cols = None
 
     def _solve(self, s, system, step_number):
         """The pressure of every local particle (0 off the rows; ghosts refreshed)."""
