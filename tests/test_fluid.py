@@ -386,3 +386,42 @@ def test_a_solve_that_reuses_the_preconditioner_lets_its_matrix_go_with_it():
     # The set-up's values live on with its matrix; the later steps' are gone.
     assert [ref() is not None for ref in alive] == [True, False, False]
     solver.destroy()
+
+
+def test_a_new_set_up_lets_the_last_set_ups_matrix_go_before_it_builds():
+    """A set-up replaces the hierarchy built on the last set-up's matrix: that matrix, and
+    the arrays it is made on, are gone once the new one is set up, not only after its
+    solve (the set-up is the step's largest allocation; docs/performance.md, memory in
+    3D)."""
+    import weakref
+
+    from mpi4py import MPI
+
+    from parmps import config, schema
+    with open(CASES / "hydrostatic.toml") as handle:
+        raw = config.load_text(handle.read())
+    # No reuse: every solve sets its preconditioner up afresh.
+    config.apply_override(raw, "pressure.reuse_preconditioner=0")
+    solver = pressure.PressureSolver(MPI.COMM_SELF, schema.validate(raw)["pressure"])
+    n, alive, seen = 60, [], []
+    solve_with = solver._solve_with
+
+    def watching(ksp, matrix, b, x, guess, reuse, report_unused=False):
+        # CG's first iteration comes after the set-up: which matrices' arrays live then.
+        def first_iteration(ksp, iteration, residual):
+            if iteration == 0:
+                seen.append((reuse, [ref() is not None for ref in alive]))
+        ksp.cancelMonitor()
+        ksp.setMonitor(first_iteration)
+        return solve_with(ksp, matrix, b, x, guess, reuse, report_unused)
+
+    solver._solve_with = watching
+    for step, shift in enumerate((0.10, 0.11, 0.12)):
+        indptr, columns, values = _chain_rows(n, shift)
+        alive.append(weakref.ref(values))
+        solver.solve((indptr, columns, values), _NO_OTHER, np.sin(np.arange(n)), np.zeros(n),
+                     step, np.arange(n))
+        del indptr, columns, values
+    assert solver.setups == 3
+    assert seen == [(False, [True]), (False, [False, True]), (False, [False, False, True])]
+    solver.destroy()
