@@ -9,19 +9,19 @@ in an allocation.
 import math
 import os
 
-from parmps.core.settings import search_radius
 
 # Fitted to the peak resident memory of the dam breaks on 2 ranks (the interpreter and
-# libraries included; python -m parmps bench --ranks 2 --steps 10 --warmup 3, 2026-11-28):
-# 2D, 1.01 M particles, 43 lattice neighbours within the search radius: 3.53 kB a
-# particle; 3D (SPHERIC), 2.93 M particles, 212 neighbours: 6.79 kB. Per particle the
-# fields, the step's copies and temporaries and the solver's vectors and coarse levels;
-# per neighbour the pair index (8 bytes) and its share of the matrix entries (12 bytes
-# each, within the Laplacian's radius, in the step's matrix and the one the
-# preconditioner was set up on). The earlier 400 + 52 per neighbour put the 3D run at
-# 31 GiB, which refused it on a 23.5 GiB machine, and the 2D one 25 % low.
-_BYTES_PER_PARTICLE = 2700
-_BYTES_PER_PAIR = 20
+# libraries included; python -m parmps bench [--scene dam_break_3d] --particles 1000000
+# --ranks 2 --steps 10 --warmup 3 [--set mps.re_laplacian=R], 2026-11-28), per particle
+# A + B x the lattice neighbours within the Laplacian's radius: the pairs the step holds at
+# its peak (the pressure solver's set-up) are the sub-lists within that radius and the
+# matrix's entries (12 bytes each) in the step's matrix, the set-up's and its hierarchy.
+# 2D, 1.01 M particles: 3,256 bytes a particle at 3.1 l0 (30 neighbours), 3,690 at 4.0
+# (50). 3D (SPHERIC, 972k): 3,063 at 2.3 l0 (51), 5,670 at 3.1 (125); at 2.93 M and 2.3 l0
+# 3,006. A 3D tank's dummies and dry walls hold no rows and no lists, so its share per
+# particle is smaller and per neighbour larger (denser coarse levels) than 2D's.
+_BYTES_PER_PARTICLE = {2: 2600, 3: 1260}
+_BYTES_PER_NEIGHBOUR = {2: 21.6, 3: 35.3}
 
 
 def particle_estimate(case):
@@ -47,15 +47,17 @@ def particle_estimate(case):
 
 
 def memory_estimate(case):
-    """Bytes a run of the case needs, about (pair lists dominate)."""
+    """Bytes a run of the case needs, about (the pair lists, the matrix and its solver's
+    set-up, which grow with the neighbours within the Laplacian's radius)."""
     particles = particle_estimate(case)
     spacing = case["particles"]["spacing"]
     if spacing is None:
-        return particles * _BYTES_PER_PARTICLE
-    # Lattice neighbours within the search radius: the volume of a d-ball of that radius.
+        # Bodies alone: no pair lists and no pressure solve; the larger share a particle.
+        return particles * max(_BYTES_PER_PARTICLE.values())
+    # Lattice neighbours within the Laplacian's radius: the volume of a d-ball of it.
     d = case.get("dimension", 2)
-    neighbours = math.pi ** (d / 2) / math.gamma(d / 2 + 1) * (search_radius(case) / spacing) ** d
-    return particles * (_BYTES_PER_PARTICLE + neighbours * _BYTES_PER_PAIR)
+    neighbours = math.pi ** (d / 2) / math.gamma(d / 2 + 1) * case["mps"]["re_laplacian"] ** d
+    return particles * (_BYTES_PER_PARTICLE[d] + neighbours * _BYTES_PER_NEIGHBOUR[d])
 
 
 def machine_memory():
