@@ -211,7 +211,7 @@ def _pairs_within_into(indptr, cols, position, radius, n_rows, near_indptr, near
     return _pairs_within(indptr, cols, position, radius, n_rows, near_indptr, near_cols, 3)
 
 
-def pairs_within(indptr, cols, position, radius, n_rows, expected_pairs=None):
+def pairs_within(indptr, cols, position, radius, n_rows, expected_pairs=None, dtype=np.int64):
     """The sub-list of the CSR pair list (rows [0, n_rows)) whose pairs lie within
     ``radius`` at ``position``, in the same order.
 
@@ -224,14 +224,15 @@ def pairs_within(indptr, cols, position, radius, n_rows, expected_pairs=None):
     ``expected_pairs``: room to fill in one pass (a little more than the last step's
     count, say); the cut runs again only when the pairs overflow it, and the result is
     the same either way. None: room for the whole list, the result copied to its size
-    (a transient of the whole list's size: in 3D a step's largest).
+    (a transient of the whole list's size: in 3D a step's largest). ``dtype``: the
+    sub-list's index type (32 bits halve it where the particles' count allows).
     """
     near_indptr = np.zeros(n_rows + 1, np.int64)
     room = int(indptr[n_rows]) if expected_pairs is None else max(int(expected_pairs), 0)
-    near_cols = np.empty(room, np.int64)
+    near_cols = np.empty(room, dtype)
     total = _pairs_within_into(indptr, cols, position, radius, n_rows, near_indptr, near_cols)
     if total > room:
-        near_cols = np.empty(total, np.int64)
+        near_cols = np.empty(total, dtype)
         _pairs_within_into(indptr, cols, position, radius, n_rows, near_indptr, near_cols)
     if expected_pairs is None:
         return near_indptr, near_cols[:total].copy()

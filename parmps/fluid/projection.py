@@ -291,8 +291,11 @@ class FluidSolver:
         s.laplacian_indptr, s.laplacian_cols = cut[c.re_laplacian]
 
     def _cut(self, indptr, cols, position, radius, n, name):
+        # 32-bit indices where a rank's particles allow (always, in practice): the sub-list
+        # is alive at the step's peak, the solver's set-up (docs/performance.md).
+        dtype = np.int32 if len(position) < 2 ** 31 else np.int64
         sub = kernels.pairs_within(indptr, cols, position, radius, n,
-                                   expected_pairs=self.expected_cut[name])
+                                   expected_pairs=self.expected_cut[name], dtype=dtype)
         # Room for the next step's cut in one pass, as for the search.
         self.expected_cut[name] = int(1.05 * len(sub[1])) + 64
         return sub
