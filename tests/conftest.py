@@ -84,3 +84,13 @@ class OneRank:
     def exscan(self, value):
         return 0
 
+
+def case_of(path, *overrides):
+    """The validated case of the TOML file ``path`` with ``overrides`` applied (each
+    ``section.key=value``, as ``--set`` takes them)."""
+    from parmps import config, schema
+    raw = config.load_text(Path(path).read_text(), str(path))
+    for assignment in overrides:
+        config.apply_override(raw, assignment)
+    return schema.validate(raw)
+

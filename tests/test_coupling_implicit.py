@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from conftest import error_lines, run_parmps
-from parmps import config, open_result, schema
+from conftest import case_of, error_lines, run_parmps
+from parmps import open_result
 from parmps.core.particles import FLUID, SOLID, Particles
 from parmps.coupling.implicit_pressure import ImplicitPressureCoupling
 from parmps.coupling.weak import WeakCoupling, fluid_force_parts
@@ -31,13 +31,6 @@ from test_coupling import BOX, CHECKS, MEMBRANE, box_bend, check_run, compare, s
 VOLUME_TOLERANCE = CHECKS["box_in_flow"].tolerance["volume_error"]
 IMPLICIT = ["--set", 'coupling.scheme="implicit_pressure"']
 WEAK = ["--set", 'coupling.scheme="weak"']
-
-
-def case_of(path, *overrides):
-    raw = config.load_text(path.read_text())
-    for assignment in overrides:
-        config.apply_override(raw, assignment)
-    return schema.validate(raw)
 
 
 def coupling_of(case, scheme=ImplicitPressureCoupling):

@@ -13,18 +13,13 @@ wall layer +0.70 (docs/design.md §1.4); in 3D, at its Laplacian radius of 2.3 l
 +0.90.
 """
 
-import os
-
 import numpy as np
 import pytest
 
-from conftest import NoHalo, OneRank
-from parmps import config, schema
+from conftest import CASES, NoHalo, OneRank, case_of
 from parmps.core import scene
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.fluid.projection import FluidSolver
-
-CASES = os.path.join(os.path.dirname(__file__), os.pardir, "cases")
 
 
 class _Hydrostatic:
@@ -49,12 +44,7 @@ class _Hydrostatic:
 
 
 def _residual(name, body_force):
-    path = os.path.join(CASES, name)
-    with open(path) as handle:
-        raw = config.load_text(handle.read(), path)
-    config.apply_override(raw, 'mps.source="mixed"')
-    config.apply_override(raw, f'mps.mixed.body_force="{body_force}"')
-    case = schema.validate(raw)
+    case = case_of(CASES / name, 'mps.source="mixed"', f'mps.mixed.body_force="{body_force}"')
     particles, _, _ = scene.build(case)
     kind, position = particles.kind, particles.position
     spacing = case["particles"]["spacing"]

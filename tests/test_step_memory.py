@@ -8,14 +8,12 @@ once the source has read it, before the matrix is assembled, unless the shift re
 after the correction (docs/performance.md, memory in 3D).
 """
 
-import os
 import weakref
 
 import numpy as np
 import pytest
 
-from conftest import CASES, NoHalo, OneRank
-from parmps import config, schema
+from conftest import CASES, NoHalo, OneRank, case_of
 from parmps.core import kernels, scene
 from parmps.fluid import projection
 from parmps.fluid.projection import FluidSolver
@@ -37,12 +35,7 @@ class _Quiet:
 def _one_step(monkeypatch, name, overrides=()):
     """One step of ``name``'s first lattice; returns what the matrix's assembly was given
     and whether the search's list was alive then."""
-    path = os.path.join(CASES, name)
-    with open(path) as handle:
-        raw = config.load_text(handle.read(), path)
-    for override in overrides:
-        config.apply_override(raw, override)
-    case = schema.validate(raw)
+    case = case_of(CASES / name, *overrides)
     particles, _, _ = scene.build(case)
     fluid = FluidSolver(case, OneRank(), NoHalo(), _Quiet())
     search = {}
