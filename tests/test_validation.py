@@ -43,6 +43,37 @@ def test_reference_data_name_their_source_and_parse(name):
     assert all(len(column) > 5 for column in table.values())
 
 
+def test_the_spheric_level_record_wets_in_the_flows_order_and_starts_full_in_the_reservoir():
+    """The gauges as the level record names them (the spreadsheet's columns put back in
+    order): H3 nearest the door wets first, then H2, then H1 behind the box; H4 stands in
+    the reservoir at its 0.55 m, less the gauge's few millimetres of offset."""
+    path = validation.load("dam_break_3d").metric_arguments["level_reference"]
+    with open(path) as handle:
+        assert handle.readline().startswith("# Source:")
+    table = analysis.reference_table(path)
+    assert list(table) == ["t", "H1", "H2", "H3", "H4"]
+    wets = {name: analysis.first_crossing(table["t"], table[name], 0.01)
+            for name in ("H1", "H2", "H3")}
+    assert wets["H3"] < wets["H2"] < wets["H1"]
+    assert table["H4"][0] == pytest.approx(0.55, abs=0.005)
+
+
+def test_the_spheric_section_is_the_3d_cases_column_tank_and_box_in_x_and_z():
+    """validation/dam_break_3d/section_2d.toml, the diagnostic of the arrival's convergence:
+    every x and z of its column, tank, box and P1 sensor is the 3D case's."""
+    from conftest import ROOT, case_of
+    section = case_of(ROOT / "validation" / "dam_break_3d" / "section_2d.toml")
+    full = validation.load("dam_break_3d").case()
+    for key in ("fluid_block", "tank", "wall_box"):
+        for a, b in zip(section[key], full[key]):
+            assert a["lower"] == [b["lower"][0], b["lower"][2]]
+            assert a["upper"] == [b["upper"][0], b["upper"][2]]
+    sensor = {probe["name"]: probe for probe in full["probe"]}["P1"]["position"]
+    assert {probe["name"]: probe for probe in section["probe"]}["P1"]["position"] == \
+        [sensor[0], sensor[2]]
+    assert section["particles"]["spacing"] == full["particles"]["spacing"]
+
+
 def test_martin_moyce_front_starts_at_the_column_and_advances():
     table = analysis.reference_table(validation.load("dam_break").reference)
     assert list(table) == ["T", "Z"]
@@ -104,7 +135,8 @@ def test_running_mean_keeps_a_constant_averages_a_period_away_and_counts_nan_as_
 
 def test_the_spheric_plot_script_prints_windows_and_draws_a_section(tmp_path):
     """validation/dam_break_3d/plot.py on a short run at 0.55/5 m: the table, each sensor's
-    window means beside the record's, and the section through the sensors' line."""
+    window means beside the record's, the level gauges beside theirs, and the section
+    through the sensors' line."""
     from conftest import ROOT, run_parmps, run_python
     out = tmp_path / "run"
     ran = run_parmps([ROOT / "cases" / "dam_break_3d.toml", "-o", out, "--set",
@@ -124,4 +156,9 @@ def test_the_spheric_plot_script_prints_windows_and_draws_a_section(tmp_path):
     cells = [re.findall(r"(-?\d+|nan)/ *(-?\d+)", row.split(") s", 1)[1]) for row in rows]
     assert all(len(cell) == 1 for cell in cells), shown.stdout
     assert cells[0][0][1] == "8166"
+    # The level gauges beside the record's: H3, nearest the door, wets first in both.
+    gauges = {line.split()[0]: line for line in shown.stdout.splitlines()
+              if re.match(r"H[1-4] ", line)}
+    assert sorted(gauges) == ["H1", "H2", "H3", "H4"]
+    assert "(0.220)" in gauges["H3"] and "0.2-0.6:" in gauges["H3"]
     assert png.stat().st_size > 10_000

@@ -705,8 +705,27 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
     return out
 
 
+def level_metrics(path, record, windows, wet_depth):
+    """Level probes against a record of the same gauges (``record``: time first, then a
+    column per gauge [m]): per gauge, the first time deeper than ``wet_depth`` and the mean
+    depth over each of its ``windows``, simulated and measured."""
+    te = list(record.values())[0]
+    out = {}
+    for name, spans in windows.items():
+        t, depth = read_probe(path, name)
+        depth = np.asarray(depth, float).ravel()
+        out[name] = {"wet": first_crossing(t, depth, wet_depth),
+                     "wet_measured": first_crossing(te, record[name], wet_depth),
+                     "means": [{"window": [start, end],
+                                "mean": window_mean(t, depth, start, end),
+                                "mean_measured": window_mean(te, record[name], start, end)}
+                               for start, end in spans]}
+    return out
+
+
 def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=500.0,
-                            peak_width=0.01, peak_until=None, arrival_sensors=()):
+                            peak_width=0.01, peak_until=None, arrival_sensors=(),
+                            level_reference=None, level_windows=None, wet_depth=0.02):
     """Pressure probes against a record of the same sensors in SI units (SPHERIC Test 2).
 
     ``reference``: a CSV whose first column is the time [s] and whose others are named
@@ -716,10 +735,19 @@ def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=50
     ``means`` (simulated, measured, relative difference per window) and ``peak``: the
     largest ``peak_width``-second running mean up to ``peak_until`` (default the run's
     end), with its time, beside the record's.
+
+    With ``level_reference`` (a CSV of the same record's water depths, its columns named
+    after the level probes) and ``level_windows`` (gauge name -> windows): per gauge, its
+    ``wet`` time (the first depth above ``wet_depth`` [m]) and mean depth per window,
+    simulated beside measured. Reported, not judged: the record's gauges read a few
+    millimetres off before the release.
     """
     table = reference_table(reference)
     te = list(table.values())[0]
     out = {}
+    if level_reference is not None and level_windows:
+        out["levels"] = level_metrics(path, reference_table(level_reference), level_windows,
+                                      wet_depth)
     for name, spans in windows.items():
         t, p = read_probe(path, name)
         pe = table[name]

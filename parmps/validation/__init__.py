@@ -76,6 +76,10 @@ class Validation:
             # Several reference files (one per probe), named relative to the folder.
             arguments["references"] = {key: os.path.join(self.folder, value)
                                        for key, value in arguments["references"].items()}
+        if isinstance(arguments.get("level_reference"), str):
+            # A second record of the same experiment (its water heights), beside the first.
+            arguments["level_reference"] = os.path.join(self.folder,
+                                                        arguments["level_reference"])
         return arguments
 
     def measure(self, result, **overrides):
@@ -207,6 +211,7 @@ def load(name, directory=DIRECTORY):
         **{table: tables[table] for table in TABLES if table != "other_cases"})
     references = validation.metric_arguments.get("references")
     missing = [p for p in [validation.case_path, validation.reference,
+                           validation.metric_arguments.get("level_reference"),
                            *validation.other_cases.values(),
                            *(references.values() if isinstance(references, dict) else ())]
                if p and not os.path.isfile(p)]

@@ -10,7 +10,7 @@ Run the case first, e.g. at 0.55/10 m on 2 ranks:
 
 Prints, per sensor, the arrival (P1-P4), the means over the compared windows and the
 peak of the 10 ms running mean, simulated beside measured; plots P1-P8 over the record
-and the level gauges H1-H4; with --windows, each sensor's mean over short windows beside
+and the level gauges H1-H4 over theirs; with --windows, each sensor's mean over short windows beside
 the record's; with --section, the flow through the sensors' line at chosen times. Exits 1
 when a target of validation.toml is missed.
 """
@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 def judge(metrics, tolerance):
     """The targets missed, as sentences (empty: every target met)."""
     missed = []
-    for name, row in metrics.items():
+    for name, row in sensors(metrics).items():
         if "arrival" in row and not abs(row["arrival_error"]) <= tolerance["arrival"]:
             missed.append(f"{name} arrival {row['arrival']:.3f} s against "
                           f"{row['arrival_measured']:.3f} s")
@@ -39,10 +39,26 @@ def judge(metrics, tolerance):
     return missed
 
 
+def sensors(metrics):
+    """The per-sensor rows of the metric (without the level gauges')."""
+    return {name: row for name, row in metrics.items() if name != "levels"}
+
+
+def level_lines(metrics):
+    """The level gauges beside the record's: wetting time and mean depth per window."""
+    lines = ["gauge  wet > 2 cm [s] (exp)  mean depth [m] sim / exp per window (reported, "
+             "not judged)"]
+    for name, row in metrics.get("levels", {}).items():
+        means = "; ".join(f"{m['window'][0]:g}-{m['window'][1]:g}: {m['mean']:.3f} / "
+                          f"{m['mean_measured']:.3f}" for m in row["means"])
+        lines.append(f"{name:5}  {row['wet']:.3f} ({row['wet_measured']:.3f})        {means}")
+    return lines
+
+
 def table(metrics):
     lines = ["sensor  arrival [s] (exp)   means [Pa] sim / exp (error) per window      "
              "peak 10 ms [Pa] (exp) at t [s]"]
-    for name, row in metrics.items():
+    for name, row in sensors(metrics).items():
         arrival = (f"{row['arrival']:.3f} ({row['arrival_measured']:.3f})"
                    if "arrival" in row else "-")
         means = "; ".join(f"{m['window'][0]:g}-{m['window'][1]:g}: {m['mean']:.0f} / "
@@ -50,7 +66,7 @@ def table(metrics):
         lines.append(f"{name:6}  {arrival:18}  {means:50}  {row['peak']:.0f} "
                      f"({row['peak_measured']:.0f}) at {row['peak_time']:.3f} "
                      f"({row['peak_time_measured']:.3f})")
-    return "\n".join(lines)
+    return "\n".join(lines + level_lines(metrics))
 
 
 def windows(path, check, width, start=0.4):
@@ -135,11 +151,13 @@ def plot(path, check, png):
                 label="parmps, 10 ms mean")
         ax.set_title(name)
         ax.set_ylabel("p [Pa]")
+    levels = analysis.reference_table(check.metric_arguments["level_reference"])
     for k, name in enumerate(f"H{i}" for i in range(1, 5)):
         ax = axes.flat[8 + k]
         t, level = analysis.read_probe(path, name)
+        ax.plot(levels["t"], levels[name], color="0.6", lw=0.6)
         ax.plot(t, level, color="C1", lw=0.8)
-        ax.set_title(f"{name} (level; record not given)")
+        ax.set_title(f"{name} (water depth)")
         ax.set_ylabel("z [m]")
         ax.set_xlabel("t [s]")
     axes.flat[0].legend(fontsize=7)
