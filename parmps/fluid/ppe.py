@@ -33,7 +33,8 @@ from parmps.fluid.relaid import RelaidPreconditioner
 log = logging.getLogger(__name__)
 
 # The second try of a failed solve (PressureSolver._solve_with_diagonal) may take this many
-# times [pressure] max_iterations: CG with the diagonal alone needs some ten times GAMG's.
+# times the failed solve's iteration limit: CG with the diagonal alone needs some ten times
+# GAMG's iterations (106-108 against 4-14 on the 2D dam break at 6.8k particles).
 DIAGONAL_ITERATIONS = 10
 
 OPTIONS_PREFIX = "pressure_"
