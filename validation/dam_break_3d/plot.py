@@ -9,10 +9,11 @@ Run the case first, e.g. at 0.55/10 m on 2 ranks:
     ./scripts/run cases/dam_break_3d.toml --set particles.spacing=0.055 -o out/dam_break_3d_10
 
 Prints, per sensor, the arrival (P1-P4), the means over the compared windows and the
-peak of the 10 ms running mean, simulated beside measured; plots P1-P8 over the record
-and the level gauges H1-H4 over theirs; with --windows, each sensor's mean over short windows beside
-the record's; with --section, the flow through the sensors' line at chosen times. Exits 1
-when a target of validation.toml is missed.
+peak of the 10 ms running mean, simulated beside measured, then the level gauges' wetting
+and mean depths beside theirs; plots P1-P8 and H1-H4 over the record; with --windows,
+each sensor's mean over short windows beside the record's; with --section, the flow
+through the sensors' line at chosen times. Exits 1 when a target of validation.toml is
+missed.
 """
 
 import argparse
