@@ -53,6 +53,10 @@ def test_scaling_counts_the_messages_of_a_step(tmp_path):
     # Both ranks send the same kinds of message: the mean is within the largest.
     assert 0 < two["p2p_bytes_mean"] <= two["p2p_bytes"]
     assert 0 < two["ghosts_per_owned"] < 0.5
+    # The rows of the step: every fluid particle, some walls, no dummy.
+    for line in (one, two):
+        assert 0 < line["fluid"] < line["rows_per_step"] < line["particles"]
+        assert line["us_per_row_step"] > line["us_per_particle_step"]
     assert two["ksp_iterations_per_step"] > 0
     # Every CG iteration multiplies by the matrix at least once: a message each.
     assert two["solve_messages"] >= two["ksp_iterations_per_step"]

@@ -11,8 +11,13 @@
 Each run builds cases/dam_break.toml at the spacing that gives about N particles
 (fluid, walls and dummies), takes W warm-up steps (numba compilation, first
 AMG set-ups), then times S steps. It prints particles, ranks, steps, seconds,
-us_per_particle_step, a breakdown of seconds by part (the slowest rank's) and
-max_rss_mb, the peak resident memory summed over the ranks.
+us_per_particle_step, a breakdown of seconds by part (the slowest rank's; the
+fastest rank's in ``breakdown_fastest``) and max_rss_mb, the peak resident memory
+summed over the ranks; ``fluid``, ``rows_per_step`` (the particles with sums of
+their own: the fluid and the walls near it, not the dummies or the dry walls; the
+mean over the timed steps) and ``us_per_row_step``. A tank's walls are a smaller
+share of its particles the finer its spacing, and dry walls cost almost nothing, so
+the cost per row-step tells a size's cost apart from its mix of particles.
 ``--set`` applies case overrides as parmps does (a pressure scheme, say).
 ``--repeat K`` runs the rank counts in turn K times (A B A B) and ends with one more
 line, the speed-up of each rank count over the first: the median over the rounds of
@@ -69,6 +74,8 @@ import statistics
 import sys
 import tempfile
 import time
+
+import numpy as np
 
 from parmps.errors import CaseError
 from parmps.validation import ROOT
@@ -231,21 +238,24 @@ class _SolveTraffic:
 
 class _WarmTally:
     """An observer that starts the clock once the warm-up steps are done and counts, over the
-    timed steps, this rank's ghost-to-owned ratio, the solve's iterations and the most
-    neighbour ranks."""
+    timed steps, this rank's ghost-to-owned ratio, the solve's iterations, the most
+    neighbour ranks and the rows of the step (the owned particles with sums of their own:
+    neither dummies nor dry walls)."""
 
     def __init__(self, comm, run, warmup, solve_traffic):
         self.comm, self.run, self.warmup = comm, run, warmup
         self.solve_traffic = solve_traffic
         self.marks = {}
-        self.ghost_ratio, self.iterations, self.neighbours = 0.0, 0, 0
+        self.ghost_ratio, self.iterations, self.neighbours, self.rows = 0.0, 0, 0, 0
 
     def __call__(self, state):
         decomposition = self.run.decomposition
         if state.step > self.warmup:
-            self.ghost_ratio += decomposition.n_ghost / max(state.particles.n_owned, 1)
+            particles = state.particles
+            self.ghost_ratio += decomposition.n_ghost / max(particles.n_owned, 1)
             self.iterations += int(state.diagnostics.get("ksp_iterations", 0))
             self.neighbours = max(self.neighbours, len(decomposition.neighbours))
+            self.rows += rows_of_the_step(particles)
         if state.step == self.warmup:
             self.comm.Barrier()
             self.marks = {"start": time.perf_counter(),
@@ -255,8 +265,9 @@ class _WarmTally:
                           "setups": self.run.pressure_solver.setups}
             self.solve_traffic.mark()
 
-    def breakdown(self, seconds):
-        """Each phase's seconds over the timed steps, the slowest rank's."""
+    def breakdown(self, seconds, op="MAX"):
+        """Each phase's seconds over the timed steps, the slowest rank's (``op`` "MIN": the
+        fastest rank's, which with the slowest's shows where the ranks' work differs)."""
         from mpi4py import MPI
         timers, decomposition, marks = self.run.fluid.timers, self.run.decomposition, self.marks
         parts = {part: timers.seconds[part] - marks["fluid"][part]
@@ -265,13 +276,24 @@ class _WarmTally:
         parts["migration"] = decomposition.migration_seconds - marks["migration"]
         # The rest of the step: the bodies' substeps, the coupling, the driver's phases.
         parts["other"] = max(0.0, seconds - sum(parts.values()))
-        return {k: self.comm.allreduce(v, op=MPI.MAX) for k, v in parts.items()}
+        return {k: self.comm.allreduce(v, op=getattr(MPI, op)) for k, v in parts.items()}
+
+
+def rows_of_the_step(particles):
+    """The owned particles that had rows in the last step: every one but the dummies and the
+    dry walls (docs/performance.md, "Walls away from the water leave the step"). The step's
+    work goes with them, so their share of the particles sets the cost per particle-step
+    when the walls' share changes with the size."""
+    from parmps.core.particles import DUMMY
+    n = particles.n_owned
+    return int(np.count_nonzero((particles.kind[:n] != DUMMY) & (particles.dry[:n] == 0)))
 
 
 def worker(args):
     """One timed run on the ranks of COMM_WORLD; rank 0 prints the JSON line."""
     from mpi4py import MPI
 
+    from parmps.core.particles import FLUID
     from parmps.run.observers import Callback
     from parmps.run.simulation import Simulation
     comm = MPI.COMM_WORLD
@@ -286,7 +308,11 @@ def worker(args):
     comm.Barrier()
     seconds = time.perf_counter() - tally.marks["start"]
     breakdown = tally.breakdown(seconds)
+    fastest = tally.breakdown(seconds, "MIN")
     particles = comm.allreduce(run.state.particles.n_owned)
+    owned = run.state.particles.kind[:run.state.particles.n_owned]
+    fluid = comm.allreduce(int(np.count_nonzero(owned == FLUID)))
+    rows = comm.allreduce(tally.rows) / args.steps
     solve = {name: comm.allreduce(value / args.steps, op=MPI.MAX)
              for name, value in solve_traffic.since_mark().items()}
     ghosts_per_owned = comm.allreduce(tally.ghost_ratio / args.steps, op=MPI.MAX)
@@ -298,7 +324,10 @@ def worker(args):
             "particles": particles, "ranks": comm.size, "steps": args.steps,
             "seconds": round(seconds, 4),
             "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
+            "fluid": fluid, "rows_per_step": round(rows),
+            "us_per_row_step": round(1e6 * seconds / (max(rows, 1) * args.steps), 3),
             "breakdown": {k: round(v, 4) for k, v in breakdown.items()},
+            "breakdown_fastest": {k: round(v, 4) for k, v in fastest.items()},
             "max_rss_mb": round(memory, 1),
             "bytes_per_particle": round(memory * 2 ** 20 / particles),
             "spacing": spacing,
