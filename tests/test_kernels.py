@@ -458,6 +458,32 @@ def test_smallest_eigenvalue(dimension):
         assert got == pytest.approx(expected, abs=1e-13 * np.abs(a).max())
 
 
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_an_eigenvalue_below_a_limit_is_told_by_the_pivots(dimension):
+    """The corrected gradient's test (3D) against numpy's eigenvalues: random symmetric
+    matrices around the default limit, singular ones, and the limit hit exactly."""
+    rng = np.random.default_rng(5)
+    d = dimension
+    work = np.empty((d, d))
+    cases = []
+    for _ in range(2000):
+        q, _ = np.linalg.qr(rng.normal(size=(d, d)))
+        eigenvalues = rng.uniform(-0.2, 1.5, size=d)
+        cases.append((q @ np.diag(eigenvalues) @ q.T, eigenvalues.min()))
+    # Exactly at the limit (a diagonal matrix has its eigenvalues exactly), and a zero pivot
+    # with a column below it that is not zero.
+    cases += [(np.diag([1.0] * (d - 1) + [0.7]), 0.7), (np.diag([0.7] * d), 0.7)]
+    singular = np.eye(d) * 0.7
+    singular[0, 1] = singular[1, 0] = 0.1
+    cases.append((singular, 0.6))
+    limit = 0.7
+    for a, smallest in cases:
+        a = np.ascontiguousarray((a + a.T) / 2)
+        if abs(smallest - limit) < 1e-12 and smallest != limit:
+            continue
+        assert kernels._has_eigenvalue_below(a, limit, work) == (smallest < limit), (a, smallest)
+
+
 def test_kernels_want_two_or_three_components():
     position = np.zeros((3, 4))
     indptr, cols = np.zeros(4, np.int64), np.empty(0, np.int64)
