@@ -484,6 +484,50 @@ def test_an_eigenvalue_below_a_limit_is_told_by_the_pivots(dimension):
         assert kernels._has_eigenvalue_below(a, limit, work) == (smallest < limit), (a, smallest)
 
 
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_the_corrected_gradient_in_one_pass_is_the_three_kernels_in_turn(dimension):
+    """kernels.corrected_pressure_gradient against the gradient's sum scaled, the correction
+    along the normal on the surface rows and the full correction on the others, bit for bit:
+    a jittered lattice with a ragged top (rows corrected and left alone), a row mask, surface
+    rows with and without a normal, and dummies that carry no pressure."""
+    rng = np.random.default_rng(11)
+    m = 14 if dimension == 3 else 40
+    grid = np.stack(np.meshgrid(*[np.arange(m)] * dimension, indexing="ij"), -1)
+    position = grid.reshape(-1, dimension) + 0.12 * rng.standard_normal((m ** dimension,
+                                                                         dimension))
+    position = position[~((position[:, -1] > 0.6 * m) & (rng.random(len(position)) < 0.3))]
+    n = len(position)
+    radius = 2.3
+    indptr, cols = pair_list(position, radius, n_rows=n)
+    pressure = rng.random(n)
+    has_pressure = rng.random(n) > 0.05
+    rows = rng.random(n) > 0.1
+    surface_rows = rng.random(n) < 0.2
+    normal = rng.standard_normal((n, dimension))
+    normal[rng.random(n) < 0.1] = 0.0
+    # d/n0 with n0 the full lattice's number density: A_i near the identity inside.
+    n0 = np.percentile(kernels.number_density(indptr, cols, position, radius, n)[0], 90)
+    scale, limit, surface_limit = dimension / n0, 0.7, 0.3
+    for surface in (False, True):
+        expected = scale * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
+                                                         has_pressure, radius, n, rows)
+        every = rows
+        if surface:
+            every = rows & ~surface_rows
+            along = kernels.correct_normal_component(indptr, cols, position, has_pressure,
+                                                     radius, scale, expected, normal,
+                                                     surface_limit, surface_rows)
+            assert 0 < along < np.count_nonzero(surface_rows)
+        counted = kernels.correct_gradient(indptr, cols, position, has_pressure, radius, scale,
+                                           expected, limit, every)
+        assert 0 < counted < np.count_nonzero(every)
+        got = kernels.corrected_pressure_gradient(
+            indptr, cols, position, pressure, has_pressure, radius, scale, n, limit, rows,
+            surface_rows if surface else None, normal if surface else None, surface_limit)
+        np.testing.assert_array_equal(got, expected)
+        assert np.all(got[~rows] == 0.0)
+
+
 def test_kernels_want_two_or_three_components():
     position = np.zeros((3, 4))
     indptr, cols = np.zeros(4, np.int64), np.empty(0, np.int64)

@@ -501,6 +501,40 @@ def _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
 
 
 @numba.njit(cache=True, inline="always")
+def _correct_row(a, work, gradient, i, min_eigenvalue, d):
+    """Row i of ``gradient`` times A^-1 (``a``, its moment matrix), unless A has an eigenvalue
+    below ``min_eigenvalue``; whether it was corrected. ``work`` is d×d scratch."""
+    if d == 2:
+        trace = a[0, 0] + a[1, 1]
+        det = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
+        smallest = 0.5 * trace - np.sqrt(max(0.25 * trace * trace - det, 0.0))
+        if smallest < min_eigenvalue:
+            return False
+        g0 = gradient[i, 0]
+        g1 = gradient[i, 1]
+        gradient[i, 0] = (a[1, 1] * g0 - a[0, 1] * g1) / det
+        gradient[i, 1] = (a[0, 0] * g1 - a[0, 1] * g0) / det
+        return True
+    if _has_eigenvalue_below(a, min_eigenvalue, work):
+        return False
+    # A^-1 g by the adjugate (A is symmetric, and so are its cofactors).
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
+    c01 = a[0, 2] * a[1, 2] - a[0, 1] * a[2, 2]
+    c02 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    c11 = a[0, 0] * a[2, 2] - a[0, 2] * a[0, 2]
+    c12 = a[0, 1] * a[0, 2] - a[0, 0] * a[1, 2]
+    c22 = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    g0 = gradient[i, 0]
+    g1 = gradient[i, 1]
+    g2 = gradient[i, 2]
+    gradient[i, 0] = (c00 * g0 + c01 * g1 + c02 * g2) / det
+    gradient[i, 1] = (c01 * g0 + c11 * g1 + c12 * g2) / det
+    gradient[i, 2] = (c02 * g0 + c12 * g1 + c22 * g2) / det
+    return True
+
+
+@numba.njit(cache=True, inline="always")
 def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradient,
                       min_eigenvalue, rows, d):
     a = np.empty((d, d))
@@ -511,34 +545,8 @@ def _correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradi
         if rows is not None and not rows[i]:
             continue
         _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
-        if d == 2:
-            trace = a[0, 0] + a[1, 1]
-            det = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
-            smallest = 0.5 * trace - np.sqrt(max(0.25 * trace * trace - det, 0.0))
-            if smallest < min_eigenvalue:
-                continue
-            g0 = gradient[i, 0]
-            g1 = gradient[i, 1]
-            gradient[i, 0] = (a[1, 1] * g0 - a[0, 1] * g1) / det
-            gradient[i, 1] = (a[0, 0] * g1 - a[0, 1] * g0) / det
-        else:
-            if _has_eigenvalue_below(a, min_eigenvalue, work):
-                continue
-            # A^-1 g by the adjugate (A is symmetric, and so are its cofactors).
-            c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[1, 2]
-            c01 = a[0, 2] * a[1, 2] - a[0, 1] * a[2, 2]
-            c02 = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-            c11 = a[0, 0] * a[2, 2] - a[0, 2] * a[0, 2]
-            c12 = a[0, 1] * a[0, 2] - a[0, 0] * a[1, 2]
-            c22 = a[0, 0] * a[1, 1] - a[0, 1] * a[0, 1]
-            det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
-            g0 = gradient[i, 0]
-            g1 = gradient[i, 1]
-            g2 = gradient[i, 2]
-            gradient[i, 0] = (c00 * g0 + c01 * g1 + c02 * g2) / det
-            gradient[i, 1] = (c01 * g0 + c11 * g1 + c12 * g2) / det
-            gradient[i, 2] = (c02 * g0 + c12 * g1 + c22 * g2) / det
-        corrected += 1
+        if _correct_row(a, work, gradient, i, min_eigenvalue, d):
+            corrected += 1
     return corrected
 
 
@@ -569,6 +577,76 @@ def correct_gradient(indptr, cols, position, has_pressure, radius, scale, gradie
 
 
 @numba.njit(cache=True, inline="always")
+def _corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure, radius, scale,
+                                 n_rows, min_eigenvalue, rows, surface_rows, normal,
+                                 surface_limit, d):
+    out = np.zeros((n_rows, d))
+    a = np.empty((d, d))
+    work = np.empty((d, d))
+    radius2 = radius * radius
+    for i in range(n_rows):
+        if rows is not None and not rows[i]:
+            continue
+        minimum = pressure[i]
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not has_pressure[j]:
+                continue
+            if pair_distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
+                minimum = pressure[j]
+        for k in range(d):
+            for m in range(d):
+                a[k, m] = 0.0
+        # The gradient's sum and the moment matrix in one pass over the pairs, each term
+        # as pressure_gradient_sum and _moment_matrix write it (the same sums, bit for bit).
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not has_pressure[j]:
+                continue
+            r2 = pair_distance2(position, i, j, d)
+            w = _weight_of_r2(r2, radius)
+            if w > 0.0:
+                factor = (pressure[j] - minimum) * w / r2
+                for k in range(d):
+                    out[i, k] += factor * pair_component(position, i, j, k)
+                for k in range(d):
+                    for m in range(k, d):
+                        a[k, m] += pair_component(position, i, j, k) * \
+                            pair_component(position, i, j, m) * w / r2
+        for k in range(d):
+            out[i, k] = scale * out[i, k]
+            for m in range(k, d):
+                a[k, m] *= scale
+                a[m, k] = a[k, m]
+        if surface_rows is not None and surface_rows[i]:
+            _correct_row_along(a, out, normal, i, surface_limit, d)
+        else:
+            _correct_row(a, work, out, i, min_eigenvalue, d)
+    return out
+
+
+@numba.njit(cache=True)
+def corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure, radius, scale,
+                                n_rows, min_eigenvalue, rows=None, surface_rows=None,
+                                normal=None, surface_limit=0.0):
+    """The corrected pressure gradient of the rows [0, n_rows) in one pass over each row's
+    pairs: ``scale`` times :func:`pressure_gradient_sum`, then corrected by
+    :func:`correct_normal_component` on the ``surface_rows`` (along ``normal``, down to
+    ``surface_limit``) and by :func:`correct_gradient` on the others (down to
+    ``min_eigenvalue``), bit for bit what the three give in turn, without reading the pairs
+    twice more for the moment matrices (in 3D the correction's pass cost more than the
+    gradient's). ``rows``: optional mask of the rows wanted, the others 0."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure,
+                                            radius, scale, n_rows, min_eigenvalue, rows,
+                                            surface_rows, normal, surface_limit, 2)
+    return _corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure, radius,
+                                        scale, n_rows, min_eigenvalue, rows, surface_rows,
+                                        normal, surface_limit, 3)
+
+
+@numba.njit(cache=True, inline="always")
 def _row_length(vectors, i, d):
     """The Euclidean length of row i of ``vectors`` (its first d components)."""
     total = 0.0
@@ -585,26 +663,37 @@ def _correct_normal_component(indptr, cols, position, has_pressure, radius, scal
     for i in range(gradient.shape[0]):
         if not rows[i]:
             continue
-        length = _row_length(normal, i, d)
-        if length <= 0.0:
+        if _row_length(normal, i, d) <= 0.0:
             continue
-        # n . A_i n, the moment matrix along the normal.
         _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
-        along = 0.0
-        for k in range(d):
-            for m in range(d):
-                along += normal[i, k] * a[k, m] * normal[i, m]
-        along /= length * length
-        if along < min_eigenvalue or along >= 1.0:
-            continue
-        component = 0.0
-        for k in range(d):
-            component += gradient[i, k] * normal[i, k]
-        factor = (1.0 / along - 1.0) * component / (length * length)
-        for k in range(d):
-            gradient[i, k] += factor * normal[i, k]
-        corrected += 1
+        if _correct_row_along(a, gradient, normal, i, min_eigenvalue, d):
+            corrected += 1
     return corrected
+
+
+@numba.njit(cache=True, inline="always")
+def _correct_row_along(a, gradient, normal, i, min_eigenvalue, d):
+    """Row i of ``gradient`` corrected along its ``normal`` by n . A n (``a``, its moment
+    matrix: :func:`correct_normal_component`); whether it was. A row without a normal, or
+    whose n . A n is below ``min_eigenvalue`` or at least 1, is left as it is."""
+    length = _row_length(normal, i, d)
+    if length <= 0.0:
+        return False
+    # n . A_i n, the moment matrix along the normal.
+    along = 0.0
+    for k in range(d):
+        for m in range(d):
+            along += normal[i, k] * a[k, m] * normal[i, m]
+    along /= length * length
+    if along < min_eigenvalue or along >= 1.0:
+        return False
+    component = 0.0
+    for k in range(d):
+        component += gradient[i, k] * normal[i, k]
+    factor = (1.0 / along - 1.0) * component / (length * length)
+    for k in range(d):
+        gradient[i, k] += factor * normal[i, k]
+    return True
 
 
 @numba.njit(cache=True)

@@ -8,8 +8,6 @@ by the inverse of the moment matrix ``A_i = d/n0 sum_j r_ij (x) r_ij w / r^2``
 (Khayyer & Gotoh 2011), exact for a linear field on any arrangement.
 """
 
-import numpy as np
-
 from parmps.config import Key
 from parmps.core import kernels
 
@@ -47,18 +45,11 @@ class CorrectedGradient(MinimumPressureGradient):
                  surface=None):
         """As the plain gradient, corrected. ``surface``: None, or (rows, normals, limit) from
         the free-surface condition: those rows are corrected along their normal only
-        (kernels.correct_normal_component) down to that limit, the others as usual."""
+        (kernels.correct_normal_component) down to that limit, the others as usual; one pass
+        over the pairs for both (kernels.corrected_pressure_gradient)."""
         c = self.constants
-        gradient = super().gradient(indptr, cols, position, pressure, has_pressure, n_rows,
-                                    rows)
-        every = rows
-        if surface is not None:
-            surface_rows, normal, surface_limit = surface
-            every = np.ones(n_rows, bool) if rows is None else rows.copy()
-            every &= ~surface_rows
-            kernels.correct_normal_component(indptr, cols, position, has_pressure,
-                                             c.re_number_density, c.dimension / c.n0, gradient,
-                                             normal, surface_limit, surface_rows)
-        kernels.correct_gradient(indptr, cols, position, has_pressure, c.re_number_density,
-                                 c.dimension / c.n0, gradient, self.eigenvalue_limit, every)
-        return gradient
+        surface_rows, normal, surface_limit = (None, None, 0.0) if surface is None else surface
+        return kernels.corrected_pressure_gradient(
+            indptr, cols, position, pressure, has_pressure, c.re_number_density,
+            c.dimension / c.n0, n_rows, self.eigenvalue_limit, rows, surface_rows, normal,
+            surface_limit)
