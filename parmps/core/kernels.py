@@ -333,6 +333,20 @@ def missing_pair_flux(indptr, cols, position, vector, missing, radius, inverse_c
 # --- pressure gradient ------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")
+def _row_pressure_minimum(indptr, cols, position, pressure, has_pressure, radius2, i, d):
+    """Pmin_i: the least pressure of row i and its neighbours within the radius that carry
+    a pressure (the minimum-pressure gradient's reference)."""
+    minimum = pressure[i]
+    for p in range(indptr[i], indptr[i + 1]):
+        j = cols[p]
+        if not has_pressure[j]:
+            continue
+        if pair_distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
+            minimum = pressure[j]
+    return minimum
+
+
+@numba.njit(cache=True, inline="always")
 def _pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radius, n_rows, rows,
                            d):
     out = np.zeros((n_rows, d))
@@ -340,13 +354,8 @@ def _pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radiu
     for i in range(n_rows):
         if rows is not None and not rows[i]:
             continue
-        minimum = pressure[i]
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if not has_pressure[j]:
-                continue
-            if pair_distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
-                minimum = pressure[j]
+        minimum = _row_pressure_minimum(indptr, cols, position, pressure, has_pressure, radius2,
+                                        i, d)
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             if not has_pressure[j]:
@@ -490,10 +499,22 @@ def _moment_matrix(indptr, cols, position, has_pressure, radius, scale, i, a, d)
         r2 = pair_distance2(position, i, j, d)
         w = _weight_of_r2(r2, radius)
         if w > 0.0:
-            for k in range(d):
-                for m in range(k, d):
-                    a[k, m] += pair_component(position, i, j, k) * \
-                        pair_component(position, i, j, m) * w / r2
+            _add_moment(a, position, i, j, w, r2, d)
+    _scale_moment(a, scale, d)
+
+
+@numba.njit(cache=True, inline="always")
+def _add_moment(a, position, i, j, w, r2, d):
+    """Pair (i, j)'s term r_ij (x) r_ij w / r^2 added to the upper triangle of ``a``."""
+    for k in range(d):
+        for m in range(k, d):
+            a[k, m] += pair_component(position, i, j, k) * \
+                pair_component(position, i, j, m) * w / r2
+
+
+@numba.njit(cache=True, inline="always")
+def _scale_moment(a, scale, d):
+    """The summed upper triangle of ``a`` times ``scale``, mirrored to the lower."""
     for k in range(d):
         for m in range(k, d):
             a[k, m] *= scale
@@ -587,13 +608,8 @@ def _corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure,
     for i in range(n_rows):
         if rows is not None and not rows[i]:
             continue
-        minimum = pressure[i]
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if not has_pressure[j]:
-                continue
-            if pair_distance2(position, i, j, d) < radius2 and pressure[j] < minimum:
-                minimum = pressure[j]
+        minimum = _row_pressure_minimum(indptr, cols, position, pressure, has_pressure, radius2,
+                                        i, d)
         for k in range(d):
             for m in range(d):
                 a[k, m] = 0.0
@@ -609,15 +625,10 @@ def _corrected_pressure_gradient(indptr, cols, position, pressure, has_pressure,
                 factor = (pressure[j] - minimum) * w / r2
                 for k in range(d):
                     out[i, k] += factor * pair_component(position, i, j, k)
-                for k in range(d):
-                    for m in range(k, d):
-                        a[k, m] += pair_component(position, i, j, k) * \
-                            pair_component(position, i, j, m) * w / r2
+                _add_moment(a, position, i, j, w, r2, d)
         for k in range(d):
             out[i, k] = scale * out[i, k]
-            for m in range(k, d):
-                a[k, m] *= scale
-                a[m, k] = a[k, m]
+        _scale_moment(a, scale, d)
         if surface_rows is not None and surface_rows[i]:
             _correct_row_along(a, out, normal, i, surface_limit, d)
         else:
