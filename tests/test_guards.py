@@ -125,3 +125,29 @@ def test_wall_check_sees_fluid_only_and_agrees_on_the_first_id():
     with pytest.raises(guards.RunFailure, match=r"^step 4: fluid particle 3 went through a wall: "
                                                 r"it is inside tank\[0\] right wall .*\(2 fluid"):
         guards.check_wall_penetration(particles, rectangles, 0.1, MPI.COMM_SELF, 4)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_the_compiled_box_tests_are_numpys(dimension):
+    """The driver's box tests (compiled, one pass) against numpy's masks: points on a
+    box's faces, inside two overlapping boxes, outside every box, NaN, and left out by the
+    mask."""
+    from parmps.core.geometry import first_box_holding, outside_box
+    rng = np.random.default_rng(dimension)
+    points = rng.uniform(-0.2, 1.2, (5000, dimension))
+    points[:50] = np.round(points[:50] * 4) / 4          # on the faces at multiples of 0.25
+    points[50] = 0.5
+    points[50, 0] = np.nan
+    lower = np.array([[0.0] * dimension, [0.25] * dimension, [0.5] * dimension])
+    upper = np.array([[0.5] * dimension, [0.75] * dimension, [1.0] * dimension])
+    mask = rng.uniform(size=len(points)) < 0.8
+    expected = np.full(len(points), -1)
+    for k in reversed(range(len(lower))):
+        expected[np.all((points > lower[k]) & (points < upper[k]), axis=1) & mask] = k
+    assert np.array_equal(first_box_holding(points, lower, upper, mask), expected)
+    assert set(expected) == {-1, 0, 1, 2}
+    box = (np.full(dimension, 0.25), np.full(dimension, 1.0))
+    numpy_outside = np.any((points < box[0]) | (points > box[1]), axis=1)
+    assert np.array_equal(outside_box(points, *box), numpy_outside)
+    assert not outside_box(points[50:51], *box)[0]          # NaN: no comparison holds
+    assert np.array_equal(outside_box(points[0], *box), numpy_outside[:1])

@@ -772,3 +772,23 @@ def test_the_cell_order_is_a_stable_sort_by_cell_and_the_lists_match_brute_force
     for i in range(len(position)):
         expected = np.flatnonzero((distance[i] < radius) & (np.arange(len(position)) != i))
         assert np.array_equal(np.sort(indices[indptr[i]:indptr[i + 1]]), expected)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_the_checks_reductions_are_numpys(dimension):
+    """The largest speed and the lowest non-finite id, compiled, against numpy: the same
+    bits, masked rows left out, and every kind of non-finite value found."""
+    rng = np.random.default_rng(dimension)
+    velocity = rng.normal(size=(3000, dimension)) * rng.uniform(0, 10, (3000, 1))
+    mask = rng.uniform(size=3000) < 0.5
+    expected = (velocity[mask] ** 2).sum(axis=1).max()
+    assert kernels.largest_norm2(velocity, mask) == expected
+    assert kernels.largest_norm2(velocity, np.zeros(3000, bool)) == 0.0
+    position = rng.uniform(size=(3000, dimension))
+    ids = rng.permutation(3000).astype(np.int64) + 10
+    assert kernels.lowest_id_not_finite(position, velocity, ids) == -1
+    bad = [17, 400, 2999]
+    position[17, -1] = np.inf
+    velocity[400, 0] = np.nan
+    position[2999, 0] = -np.inf
+    assert kernels.lowest_id_not_finite(position, velocity, ids) == ids[bad].min()

@@ -14,9 +14,55 @@ PATCH_EDGES = 1.5
 
 
 def outside_box(points, lower, upper):
-    """Which of the (N, d) points lie outside the closed box [lower, upper]."""
-    points = np.asarray(points)
-    return np.any((points < np.asarray(lower)) | (points > np.asarray(upper)), axis=1)
+    """Which of the (N, d) points lie outside the closed box [lower, upper] (a NaN
+    coordinate is not outside: no comparison with it holds)."""
+    points = np.asarray(points, dtype=float)
+    if points.ndim != 2:
+        points = points.reshape(-1, len(lower))
+    return _outside_box(points, np.asarray(lower, dtype=float), np.asarray(upper, dtype=float))
+
+
+# The driver checks every owned particle against the domain and the walls after every
+# step: compiled, one pass and no temporaries (numpy's masks took 35 ms a step at 289k
+# particles in 3D, a few per cent of the step).
+@numba.njit(cache=True)
+def _outside_box(points, lower, upper):
+    outside = np.zeros(points.shape[0], np.bool_)
+    for i in range(points.shape[0]):
+        for k in range(points.shape[1]):
+            if points[i, k] < lower[k] or points[i, k] > upper[k]:
+                outside[i] = True
+                break
+    return outside
+
+
+def first_box_holding(points, lower, upper, mask=None):
+    """Index of the first of the open boxes (``lower``, ``upper``: (B, d)) holding each of
+    the (N, d) points, or -1; -1 too for the points that ``mask`` (N bools) leaves out."""
+    points = np.asarray(points, dtype=float)
+    if mask is None:
+        mask = np.ones(len(points), np.bool_)
+    return _first_box_holding(points, np.asarray(lower, dtype=float).reshape(-1, points.shape[1]),
+                              np.asarray(upper, dtype=float).reshape(-1, points.shape[1]),
+                              np.asarray(mask, dtype=np.bool_))
+
+
+@numba.njit(cache=True)
+def _first_box_holding(points, lower, upper, mask):
+    which = np.full(points.shape[0], -1, np.int64)
+    for i in range(points.shape[0]):
+        if not mask[i]:
+            continue
+        for b in range(lower.shape[0]):
+            inside = True
+            for k in range(points.shape[1]):
+                if not (lower[b, k] < points[i, k] < upper[b, k]):
+                    inside = False
+                    break
+            if inside:
+                which[i] = b
+                break
+    return which
 
 
 def _even_odd(points, a, b):

@@ -1420,3 +1420,36 @@ def sort_row_columns(row_ptr, columns, values):
                     q -= gap
                 columns[q + gap] = column
                 values[q + gap] = value
+
+
+# Per-particle reductions for the driver's checks after every step: one pass, no
+# temporaries (numpy's masks, fancy-indexed copies and row reductions took about 15 ms a
+# step at 289k particles in 3D).
+
+@numba.njit(cache=True)
+def largest_norm2(vectors, mask):
+    """The largest |v|^2 over the rows of ``vectors`` that ``mask`` selects (0 if none);
+    each row's squares summed in component order, as numpy's row sums add them."""
+    largest = 0.0
+    for i in range(vectors.shape[0]):
+        if mask[i]:
+            norm2 = 0.0
+            for k in range(vectors.shape[1]):
+                norm2 += vectors[i, k] * vectors[i, k]
+            if norm2 > largest:
+                largest = norm2
+    return largest
+
+
+@numba.njit(cache=True)
+def lowest_id_not_finite(position, velocity, ids):
+    """The lowest id among the rows with a NaN or infinite position or velocity, or -1."""
+    lowest = -1
+    for i in range(position.shape[0]):
+        finite = True
+        for k in range(position.shape[1]):
+            if not (np.isfinite(position[i, k]) and np.isfinite(velocity[i, k])):
+                finite = False
+        if not finite and (lowest < 0 or ids[i] < lowest):
+            lowest = ids[i]
+    return lowest

@@ -451,8 +451,7 @@ def max_speed(particles, comm):
     """Largest fluid speed over all ranks."""
     n = particles.n_owned
     moving = FluidSolver.moving(particles.kind[:n])
-    local = float(np.sqrt((particles.velocity[:n][moving] ** 2).sum(axis=1).max())) \
-        if np.any(moving) else 0.0
+    local = float(np.sqrt(kernels.largest_norm2(particles.velocity[:n], moving)))
     return comm.allreduce(local, op=_max_op())
 
 
@@ -464,9 +463,8 @@ def _max_op():
 def check_finite(particles, comm, step):
     """Stop loudly if any owned particle has a NaN or infinite position or velocity."""
     n = particles.n_owned
-    bad = ~np.isfinite(particles.position[:n]).all(axis=1) | \
-        ~np.isfinite(particles.velocity[:n]).all(axis=1)
-    first = int(particles.id[:n][bad].min()) if np.any(bad) else -1
+    first = int(kernels.lowest_id_not_finite(particles.position[:n], particles.velocity[:n],
+                                             particles.id[:n]))
     worst = comm.allreduce(first if first >= 0 else np.iinfo(np.int64).max, op=_min_op())
     if worst != np.iinfo(np.int64).max:
         raise RunFailure(f"step {step}: particle {worst} has a non-finite position or velocity "

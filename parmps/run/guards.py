@@ -21,7 +21,7 @@ communicator before anyone raises.
 import numpy as np
 
 from parmps.errors import RunFailure
-from parmps.core.geometry import format_point
+from parmps.core.geometry import first_box_holding, format_point
 from parmps.core.particles import FLUID
 from parmps.boundaries.walls import travel
 
@@ -75,15 +75,13 @@ def wall_rectangles(case, time=0.0):
     return rectangles
 
 
-def inside_rectangles(position, rectangles, margin):
-    """Index of the first box (shrunk by ``margin``) holding each point, or -1."""
-    which = np.full(len(position), -1, np.int64)
-    # Few boxes, many points: loop over the boxes, vectorise the points.
-    for k, (lower, upper, _) in reversed(list(enumerate(rectangles))):
-        inside = np.all((position > np.add(lower, margin))
-                        & (position < np.subtract(upper, margin)), axis=1)
-        which[inside] = k
-    return which
+def inside_rectangles(position, rectangles, margin, mask=None):
+    """Index of the first box (shrunk by ``margin``) holding each point, or -1 (and -1 for
+    the points ``mask`` leaves out)."""
+    d = np.shape(position)[1]
+    lower = np.array([np.add(lower, margin) for lower, _, _ in rectangles]).reshape(-1, d)
+    upper = np.array([np.subtract(upper, margin) for _, upper, _ in rectangles]).reshape(-1, d)
+    return first_box_holding(position, lower, upper, mask)
 
 
 def check_wall_penetration(particles, rectangles, spacing, comm, step, source_settings=()):
@@ -93,16 +91,15 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step, source_se
     if not rectangles:
         return
     n = particles.n_owned
-    fluid = particles.kind[:n] == FLUID
-    position = particles.position[:n][fluid]
-    which = inside_rectangles(position, rectangles, WALL_MARGIN * spacing)
-    hit = which >= 0
+    position = particles.position[:n]
+    which = inside_rectangles(position, rectangles, WALL_MARGIN * spacing,
+                              mask=particles.kind[:n] == FLUID)
+    hit = np.flatnonzero(which >= 0)
     local = None
-    if np.any(hit):
-        ids = particles.id[:n][fluid][hit]
-        first = int(np.argmin(ids))
-        local = (int(ids[first]), int(which[hit][first]), tuple(position[hit][first]),
-                 int(np.count_nonzero(hit)))
+    if len(hit):
+        first = hit[np.argmin(particles.id[hit])]
+        local = (int(particles.id[first]), int(which[first]), tuple(position[first]),
+                 len(hit))
     found = [item for item in comm.allgather(local) if item is not None]
     if found:
         pid, k, point, _ = min(found)
