@@ -23,8 +23,8 @@ def outside_box(points, lower, upper):
 
 
 # The driver checks every owned particle against the domain and the walls after every
-# step: compiled, one pass and no temporaries (numpy's masks took 35 ms a step at 289k
-# particles in 3D, a few per cent of the step).
+# step: compiled, one pass and no temporaries (numpy's masks took 33 ms a step at 289k
+# particles in 3D, 3 % of the step, against 3 ms).
 @numba.njit(cache=True)
 def _outside_box(points, lower, upper):
     outside = np.zeros(points.shape[0], np.bool_)

@@ -1423,8 +1423,8 @@ def sort_row_columns(row_ptr, columns, values):
 
 
 # Per-particle reductions for the driver's checks after every step: one pass, no
-# temporaries (numpy's masks, fancy-indexed copies and row reductions took about 15 ms a
-# step at 289k particles in 3D).
+# temporaries (numpy's masks, fancy-indexed copies and row reductions took 12 ms a step
+# at 289k particles in 3D, against 1.5 ms).
 
 @numba.njit(cache=True)
 def largest_norm2(vectors, mask):
