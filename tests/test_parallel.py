@@ -103,6 +103,26 @@ def test_dam_break_on_three_ranks_stays_balanced(tmp_path):
 
 
 @pytest.mark.mpi
+def test_the_first_step_rebalances_once_the_dry_walls_are_known(tmp_path):
+    """The scene's cut weighs every wall as a wall; the walls away from the water weigh as
+    dummies once the first halo shows them dry, and the first load check rebalances above
+    FIRST_CUT_TOLERANCE whatever parallel.imbalance_tolerance says (at 2.93M particles the
+    SPHERIC tank's slabs were 1.093 apart there, under 1.10, for the whole run). Here the
+    tolerance is raised above the 0.55/10 m tank's 1.34."""
+    from parmps.parallel.base import FIRST_CUT_TOLERANCE
+    result = run_parmps([CASES / "dam_break_3d.toml", "-o", tmp_path, "--set",
+                         "particles.spacing=0.055", "--set", "time.max_steps=3", "--set",
+                         "output.frames=false", "--set", "parallel.imbalance_tolerance=1.5"],
+                        ranks=2, timeout=240)
+    assert result.returncode == 0, result.stderr
+    assert "step 1: rebalanced slabs (imbalance 1.3" in result.stderr
+    assert "weighed the walls before they were known dry" in result.stderr
+    with open_result(tmp_path) as run:
+        imbalance = run.diagnostics["imbalance"]
+    assert len(imbalance) == 3 and imbalance.max() <= FIRST_CUT_TOLERANCE
+
+
+@pytest.mark.mpi
 def test_more_ranks_than_the_domain_holds_exits_2(tmp_path):
     # A 0.162 m halo in a 0.32 m wide domain leaves room for one slab ("auto" would take
     # a 1 x 2 grid of blocks).
