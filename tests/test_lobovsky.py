@@ -3,9 +3,9 @@
 validation/dam_break_lobovsky/ names the case, the records, the metric and the targets:
 for the judged sensors P1-P3, the impact's arrival (the first p/(rho g H) > 0.2) within
 ±0.1 of the experiment's in t sqrt(g/H), and the mean pressure over 3 <= t sqrt(g/H) <= 6
-within 15 % of the experiment's. The run is the case as shipped (l0 = 10 mm, its own pressure
-scheme with the default free surface) on 2 ranks to just past the mean window
-(t sqrt(g/H) = 6.05), without particle frames.
+within 15 % of the experiment's. The run is the case as shipped (l0 = 5 mm, the default scheme) on
+2 ranks to just past the mean window (t sqrt(g/H) = 6.05), without particle frames; the
+whole run to t sqrt(g/H) = 7 is `python -m parmps validate dam_break_lobovsky`.
 """
 
 import math
