@@ -442,27 +442,12 @@ def _jacobi_diagonalise(work, vectors, accumulate):
 
 
 @numba.njit(cache=True)
-def _smallest_eigenvalue(a, work):
-    """Smallest eigenvalue of the symmetric matrix ``a`` (small, d×d), by
-    :func:`_jacobi_diagonalise`; ``work`` is d×d scratch."""
-    d = a.shape[0]
-    for k in range(d):
-        for m in range(d):
-            work[k, m] = a[k, m]
-    _jacobi_diagonalise(work, work, False)
-    smallest = work[0, 0]
-    for k in range(1, d):
-        smallest = min(smallest, work[k, k])
-    return smallest
-
-
-@numba.njit(cache=True)
 def _has_eigenvalue_below(a, limit, work):
     """Whether the symmetric ``a`` (small, d×d) has an eigenvalue below ``limit``: whether
     ``a - limit I`` fails to be positive semi-definite, told by the pivots of its symmetric
     elimination (all of them >= 0, a zero pivot's column below it zero, if and only if it
-    is). A few flops where :func:`_smallest_eigenvalue`'s rotations took some 40 % of the
-    corrected gradient in 3D. ``work`` is d×d scratch."""
+    is). A few flops where the smallest eigenvalue by Jacobi rotations took some 40 % of
+    the corrected gradient in 3D. ``work`` is d×d scratch."""
     d = a.shape[0]
     for k in range(d):
         for m in range(d):

@@ -81,7 +81,8 @@ class FluidStepper:
         # The largest fluid speed; the check after each step measures it for the next.
         self.fluid_speed = max_speed(state.particles, self.comm)
         # The walls away from the water weigh as dummies in the balance from the first
-        # step's cut on (the first update rebalances if they move the load).
+        # step's cut on (the first update rebalances when they move the load past
+        # parallel.base.FIRST_CUT_TOLERANCE).
         particles = self.decomposition.build_halo(state.particles.owned())
         self.fluid.mark_dry(particles)
         state.particles = particles
