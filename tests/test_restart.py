@@ -231,3 +231,22 @@ def test_probes_go_on_after_a_restart_without_repeating_rows(tmp_path):
     assert len(rows["whole"][0]) == 100
     # Pressures of about 500 Pa, continued on another rank count.
     np.testing.assert_allclose(rows["split"][1], rows["whole"][1], rtol=0, atol=1e-6)
+
+
+def test_a_probe_with_no_sample_yet_is_continued(tmp_path):
+    """A run stopped (here by its step limit; as well by a signal) before a probe's first
+    sample leaves that probe no rows; continuing it starts from none (it once stopped with
+    a traceback, reshaping the empty series)."""
+    case = tmp_path / "tank_with_late_probe.toml"
+    case.write_text((CASES / "hydrostatic.toml").read_text() +
+                    '\n[[probe]]\nname = "late"\nkind = "pressure"\nposition = [0.1, 0.05]\n'
+                    'interval = 0.08\n')
+    out = tmp_path / "run"
+    _run([case, "-o", out, "--set", "time.max_steps=5"], 1)
+    with open_result(out) as run:
+        assert len(run.probes["late"].time) == 0
+    result = _run(["--restart", out], 2)
+    assert "continuing from the checkpoint at step 5" in result.stderr
+    lines = (out / "probes" / "late.csv").read_text().splitlines()
+    assert lines[0].startswith("# probe late: pressure") and lines[1] == "time,value"
+    assert len(lines) == 2

@@ -206,7 +206,11 @@ class Probes(Observer):
                     if self.resumed:
                         # A continued run: the rows up to its checkpoint, from result.h5.
                         times = series.datasets["time"][:series.rows]
-                        values = series.datasets["value"][:series.rows].reshape(len(times), -1)
+                        # The width given, not -1: a run stopped before its first sample
+                        # left no rows, and numpy cannot infer a width from none.
+                        width = int(np.prod(probe.shape, dtype=np.int64))
+                        values = series.datasets["value"][:series.rows].reshape(len(times),
+                                                                                width)
                         self._write_rows(handle, times, values)
 
     def observe(self, state):
