@@ -163,6 +163,30 @@ def test_a_dry_wall_weighs_as_a_dummy():
     np.testing.assert_allclose(made.loads(particles), [2.3])
 
 
+@pytest.mark.parametrize("name", ["slabs", "blocks"])
+def test_only_a_cut_blind_to_dry_walls_makes_the_first_check_special(name):
+    """A scene's particles carry no dry flag: the first load check after their cut
+    rebalances above FIRST_CUT_TOLERANCE. A checkpoint's carry the dry flags its cut
+    weighed: after it the first check is like any other (the imbalance tolerance)."""
+    from mpi4py import MPI
+    from parmps.core.particles import FLUID, WALL, Particles
+    from parmps.parallel import decomposition_class
+    from parmps.parallel.base import FIRST_CUT_TOLERANCE
+    excess = 2 * (FIRST_CUT_TOLERANCE - 1.0)
+    loads = np.array([1.0 + excess, 1.0 - excess])
+    position = np.column_stack([np.linspace(1.0, 29.0, 6), np.full(6, 5.0)])
+    for dry, expected in ((np.array([0, 0, 0, 0, 1, 1]), None),
+                          (np.zeros(6), "weighed the walls before they were known dry")):
+        made = decomposition_class(name)(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0]))
+        assert FIRST_CUT_TOLERANCE < loads.max() / loads.mean() < made.imbalance_tolerance
+        scene = Particles({"id": np.arange(6), "kind": np.array([FLUID] * 4 + [WALL] * 2),
+                           "position": position, "dry": dry.astype(np.int8)})
+        made.distribute(scene)
+        reason = made._rebalance_reason(loads, step=1)
+        assert (reason is None) if expected is None else (expected in reason), reason
+        assert made._rebalance_reason(loads, step=2) is None  # only the first is special
+
+
 @pytest.mark.parametrize("ranks, lower, upper, expected", [
     (4, [0, 0], [30, 30], (2, 2)),        # square: the balanced grid
     (4, [0, 0], [120, 30], (4, 1)),       # a channel: Dims_create's 2 x 2 would cost more

@@ -111,7 +111,7 @@ def test_the_first_step_rebalances_once_the_dry_walls_are_known(tmp_path):
     tolerance is raised above the 0.55/10 m tank's 1.34."""
     from parmps.parallel.base import FIRST_CUT_TOLERANCE
     result = run_parmps([CASES / "dam_break_3d.toml", "-o", tmp_path, "--set",
-                         "particles.spacing=0.055", "--set", "time.max_steps=3", "--set",
+                         "particles.spacing=0.055", "--end-time", "0.003", "--set",
                          "output.frames=false", "--set", "parallel.imbalance_tolerance=1.5"],
                         ranks=2, timeout=240)
     assert result.returncode == 0, result.stderr
@@ -120,6 +120,15 @@ def test_the_first_step_rebalances_once_the_dry_walls_are_known(tmp_path):
     with open_result(tmp_path) as run:
         imbalance = run.diagnostics["imbalance"]
     assert len(imbalance) == 3 and imbalance.max() <= FIRST_CUT_TOLERANCE
+    # A checkpoint keeps the dry flags, so a continued run's cut (here on 3 ranks) weighs
+    # the dry walls as the step does: balanced from its first step, with no first-cut
+    # rebalance.
+    result = run_parmps(["--restart", tmp_path, "--end-time", "0.006"], ranks=3, timeout=240)
+    assert result.returncode == 0, result.stderr
+    assert "weighed the walls before they were known dry" not in result.stderr
+    with open_result(tmp_path) as run:
+        imbalance = run.diagnostics["imbalance"]
+    assert len(imbalance) == 6 and imbalance[3:].max() <= FIRST_CUT_TOLERANCE
 
 
 @pytest.mark.mpi

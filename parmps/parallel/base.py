@@ -94,7 +94,7 @@ class Decomposition(abc.ABC):
         self.migration_count = 0  # migrations that moved particles
         self._reference = (0, 1.0)  # (step, imbalance) the load drift is measured from
         self._refused = False  # the last rebalance was refused (too thin)
-        self._first_check = True  # the next load check is the first since the scene's cut
+        self._first_check = True  # the next check is the first after a cut blind to dry walls
 
     # -- the interface ------------------------------------------------------------------------
 
@@ -208,6 +208,9 @@ class Decomposition(abc.ABC):
                                f"{particles.n_owned} (the scenes differ between ranks?)")
         imbalance = self.imbalance(mine)
         self._reference = (0, imbalance)
+        # A scene knows no dry walls yet; a checkpoint keeps them, and its cut weighed them
+        # as the step will (the same answer on every rank: the same particles).
+        self._first_check = not np.any(particles.dry[:particles.n_owned])
         self._clear_halo(mine.n_owned)
         return mine, total, imbalance
 
@@ -223,7 +226,8 @@ class Decomposition(abc.ABC):
 
         The first check after the scene's cut rebalances above ``FIRST_CUT_TOLERANCE``:
         that cut weighed every wall as a wall, and the walls away from the water, known
-        only once the halo is built, weigh as dummies from the first step on. Then the
+        only once the halo is built, weigh as dummies from the first step on (a
+        checkpoint's cut knew them: after it the first check is like any other). Then the
         load (max/mean owned work) is checked at every step: above
         ``imbalance_tolerance`` the regions are rebalanced at once (unless the
         last attempt was refused, then only every interval). Every
