@@ -205,13 +205,9 @@ class Probes(Observer):
                                  f"[{UNITS[probe.kind]}], time [s]\n{columns}\n")
                     if self.resumed:
                         # A continued run: the rows up to its checkpoint, from result.h5.
-                        times = series.datasets["time"][:series.rows]
-                        # The width given, not -1: a run stopped before its first sample
-                        # left no rows, and numpy cannot infer a width from none.
-                        width = int(np.prod(probe.shape, dtype=np.int64))
-                        values = series.datasets["value"][:series.rows].reshape(len(times),
-                                                                                width)
-                        self._write_rows(handle, times, values)
+                        # (None yet when the run stopped before the probe's first sample.)
+                        self._write_rows(handle, series.datasets["time"][:series.rows],
+                                         series.datasets["value"][:series.rows])
 
     def observe(self, state):
         due = tuple(k for k, cadence in enumerate(self.cadences)
@@ -264,17 +260,17 @@ class Probes(Observer):
             for probe, series in zip(self.probes, self.series):
                 if not series.pending["time"]:
                     continue
-                values = np.asarray(series.pending["value"], float).reshape(
-                    len(series.pending["time"]), -1)
                 with open(self._csv_path(probe), "a") as handle:
-                    self._write_rows(handle, series.pending["time"], values)
+                    self._write_rows(handle, series.pending["time"], series.pending["value"])
         for series in self.series:
             series.flush(self.comm.rank)
 
     @staticmethod
     def _write_rows(handle, times, values):
-        for t, row in zip(times, values):
-            handle.write(",".join(repr(float(v)) for v in (t, *row)) + "\n")
+        """One CSV line per sample: its time, then its value's components (a scalar, or a
+        vector of the probe's shape)."""
+        for t, value in zip(times, values):
+            handle.write(",".join(repr(float(v)) for v in (t, *np.ravel(value))) + "\n")
 
     def _csv_path(self, probe):
         return os.path.join(self.csv_directory, f"{probe.name}.csv")
