@@ -8,6 +8,9 @@ once the source has read it, before the matrix is assembled, unless the shift re
 after the correction (docs/performance.md, memory in 3D).
 """
 
+import os
+import subprocess
+import sys
 import weakref
 
 import numpy as np
@@ -81,3 +84,53 @@ def test_the_matrix_is_assembled_without_the_search_list_over_its_sub_list(monke
 def test_the_search_list_stays_while_the_shift_reads_it(monkeypatch):
     _, seen, _, _ = _one_step(monkeypatch, "hydrostatic.toml", ['mps.shifting="fickian"'])
     assert seen["search_alive"]
+
+
+
+
+# A fresh interpreter: where a large array lives once PETSc's libraries are loaded, before
+# the solver's start-up (argument "loaded") or after it ("started"); glibc only (the
+# [heap] mapping of /proc/self/maps). One array a process: a block freed into the heap
+# would serve the next one from there, mapped or not.
+_WHERE_ARRAYS_LIVE = """
+import sys
+import numpy as np
+from parmps.fluid import ppe
+
+petsc4py = ppe.import_petsc4py()
+petsc4py.init([])
+from petsc4py import PETSc  # its libraries' constructors run here
+if sys.argv[1] == "started":
+    ppe._petsc()
+array = np.ones(8_000_000)  # 64 MB, above the threshold below
+for line in open("/proc/self/maps"):
+    if line.rstrip().endswith("[heap]"):
+        low, high = (int(part, 16) for part in line.split()[0].split("-"))
+        if low <= array.ctypes.data < high:
+            print("heap")
+            break
+else:
+    print("mapped")
+"""
+
+
+def _where_arrays_live(moment, **environment):
+    env = {name: value for name, value in os.environ.items() if not name.startswith("MALLOC_")}
+    result = subprocess.run([sys.executable, "-c", _WHERE_ARRAYS_LIVE, moment],
+                            capture_output=True, text=True, timeout=120,
+                            env=dict(env, **environment))
+    assert result.returncode == 0, result.stderr
+    return result.stdout.strip()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_the_environments_malloc_settings_hold_once_petsc_is_loaded():
+    """Debian's PETSc loads SuperLU_DIST, whose CombBLAS sets glibc's malloc never to map
+    a block nor trim the heap, over the environment's settings. The code keeps that (the
+    faster step) unless the environment says otherwise: then its settings are applied again
+    when the solver starts (docs/performance.md, "The heap that never shrinks")."""
+    threshold = {"MALLOC_MMAP_THRESHOLD_": str(32 * 2 ** 20)}
+    if _where_arrays_live("loaded", **threshold) == "mapped":
+        pytest.skip("this PETSc's libraries leave glibc's malloc as the environment set it")
+    assert _where_arrays_live("started", **threshold) == "mapped"
+    assert _where_arrays_live("started") == "heap"

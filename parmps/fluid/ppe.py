@@ -46,7 +46,42 @@ def _petsc():
     if not petsc4py.__dict__.get("_parmps_initialised"):
         petsc4py.init([])
     from petsc4py import PETSc
+    apply_malloc_environment()
     return PETSc
+
+
+# glibc's malloc parameters (malloc.h) by the environment variables that set them.
+MALLOPT_PARAMETERS = {"MALLOC_TRIM_THRESHOLD_": -1, "MALLOC_MMAP_THRESHOLD_": -3,
+                      "MALLOC_MMAP_MAX_": -4}
+
+
+def apply_malloc_environment():
+    """Apply glibc's malloc settings the environment gives (``MALLOC_MMAP_THRESHOLD_``,
+    ``MALLOC_TRIM_THRESHOLD_``, ``MALLOC_MMAP_MAX_``) again, now that PETSc's libraries
+    are loaded; glibc only, and nothing when none is set.
+
+    Debian's PETSc links SuperLU_DIST, whose CombBLAS sets, when the library loads, glibc's
+    count of mapped blocks to 0 and its trim threshold to never, over what the environment
+    said: from PETSc's import on every block comes from the heap, and nothing freed goes
+    back to the system. That is the faster choice for the step (its arrays reuse resident
+    pages instead of faulting fresh ones), and the code leaves it. It costs memory: the
+    heap keeps the holes the step's changing sizes leave. ``MALLOC_MMAP_THRESHOLD_=33554432``
+    (blocks of 32 MiB and more mapped, and returned when freed) took the 3D tank's peak at
+    5M particles on 2 ranks from 3.1 to 2.64 kB a particle, and its step 12-25 % longer
+    (docs/performance.md, "The heap that never shrinks")."""
+    given = {name: os.environ.get(name, "").strip() for name in MALLOPT_PARAMETERS}
+    given = {name: int(value) for name, value in given.items() if value.isdigit()}
+    if not given:
+        return
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
+    if "MALLOC_MMAP_THRESHOLD_" in given and "MALLOC_MMAP_MAX_" not in given:
+        given["MALLOC_MMAP_MAX_"] = 65536  # glibc's default count: a threshold needs one
+    for name, value in given.items():
+        mallopt(MALLOPT_PARAMETERS[name], value)
 
 
 # Where Debian's python3-petsc4py lives; its .pth file finds it only when PETSC_DIR is set
