@@ -1,6 +1,7 @@
-"""Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--set S.K=V ...]
-[--check] [--debug] [PETSc options]``, or ``python -m parmps --restart OUTDIR [CASE.toml]
-[--end-time T]`` to continue a run from its checkpoint (docs/design.md §2.3, §5).
+"""Command line: ``python -m parmps CASE.toml [-o OUTDIR] [--end-time T] [--max-steps N]
+[--set S.K=V ...] [--check] [--debug] [PETSc options]``, or ``python -m parmps --restart
+OUTDIR [CASE.toml] [--end-time T] [--max-steps N]`` to continue a run from its checkpoint
+(docs/design.md §2.3, §5).
 Two commands come before a case: ``python -m parmps validate NAME|--all|--list``
 (:mod:`parmps.validation.command`) and ``python -m parmps bench``
 (:mod:`parmps.validation.bench`); a case file that happens to be named ``validate`` or
@@ -72,10 +73,14 @@ def build_parser():
                         help="the case file (TOML); optional with --restart")
     parser.add_argument("--restart", metavar="OUTDIR",
                         help="continue the run whose output is in OUTDIR from its last "
-                             "checkpoint, on any rank count (--end-time may extend it)")
+                             "checkpoint, on any rank count (--end-time and --max-steps "
+                             "may extend it)")
     parser.add_argument("-o", "--output", metavar="OUTDIR",
                         help="output directory (default out/<case file stem>/)")
     parser.add_argument("--end-time", type=float, metavar="T", help="override time.end")
+    parser.add_argument("--max-steps", type=_step_count, metavar="N",
+                        help="override time.max_steps: stop at step N of the run, counted from "
+                             "its start (0: no limit)")
     parser.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
                         help="override a case value (repeatable)")
     parser.add_argument("--check", action="store_true",
@@ -84,6 +89,28 @@ def build_parser():
     parser.add_argument("--debug", action="store_true",
                         help="show tracebacks and debug logging")
     return parser
+
+
+def _step_count(text):
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"not a step count (an integer >= 0): {text!r}")
+    return value
+
+
+def _override_limits(raw, args):
+    """Apply --end-time and --max-steps to the raw case; whether either was given."""
+    given = False
+    if getattr(args, "end_time", None) is not None:
+        raw.setdefault("time", {})["end"] = args.end_time
+        given = True
+    if getattr(args, "max_steps", None) is not None:
+        raw.setdefault("time", {})["max_steps"] = args.max_steps
+        given = True
+    return given
 
 
 def prepare_case(args):
@@ -100,14 +127,13 @@ def prepare_case(args):
     raw = config.load_text(text, args.case)
     for assignment in args.set or []:
         config.apply_override(raw, assignment)
-    if args.end_time is not None:
-        raw.setdefault("time", {})["end"] = args.end_time
+    limits = _override_limits(raw, args)
     try:
         case = schema.validate(raw)
     except CaseError as exc:
         raise CaseError(f"{args.case}: {exc}") from None
     check_memory(case, args.case)
-    changed = bool(args.set) or args.end_time is not None
+    changed = bool(args.set) or limits
     return case, toml.dumps(raw) if changed else text
 
 
@@ -210,7 +236,7 @@ def main(argv=None):
 
 def prepare_restart(args):
     """Check that ``--restart OUTDIR`` can continue a run; returns (case, case_text) from its
-    checkpoint (with ``--end-time`` applied). Raises CaseError."""
+    checkpoint (with ``--end-time`` and ``--max-steps`` applied). Raises CaseError."""
     from parmps import config, schema
     from parmps.io.checkpoint import has_checkpoint, read_case_text
     from parmps.tools import toml
@@ -227,17 +253,19 @@ def prepare_restart(args):
     text = read_case_text(directory)
     raw = config.load_text(text, f"{directory}/checkpoint.h5")
     if args.case is not None:
-        given, _ = prepare_case(argparse.Namespace(case=args.case, set=None, end_time=None))
-        # The end time is what --end-time may change; anything else is another run.
+        given, _ = prepare_case(argparse.Namespace(case=args.case, set=None, end_time=None,
+                                                   max_steps=None))
+        # The end time and the step limit are what --end-time and --max-steps may change;
+        # anything else is another run.
         ours = schema.validate(config.load_text(text, "checkpoint"))
         for case in (given, ours):
             case["time"].pop("end")
+            case["time"].pop("max_steps")
         if given != ours:
             raise CaseError(f"{args.case} differs from the case of the run in {directory}: "
                             f"--restart continues that run with its own case (leave the case "
                             f"file out, or start a new run with -o)")
-    if args.end_time is not None:
-        raw.setdefault("time", {})["end"] = args.end_time
+    if _override_limits(raw, args):
         text = toml.dumps(raw)
     try:
         case = schema.validate(raw)

@@ -250,3 +250,32 @@ def test_a_probe_with_no_sample_yet_is_continued(tmp_path):
     lines = (out / "probes" / "late.csv").read_text().splitlines()
     assert lines[0].startswith("# probe late: pressure") and lines[1] == "time,value"
     assert len(lines) == 2
+
+
+def test_a_run_stopped_by_its_step_limit_goes_on_with_max_steps(tmp_path):
+    """``--max-steps N`` sets time.max_steps (steps counted from the run's start) for a new
+    run and for a continued one: a run stopped by its step limit goes on past it to the
+    uninterrupted run's answer. A limit that is not a step count is refused in one line."""
+    case = CASES / "mass_spring_7x7.toml"
+    whole, split = tmp_path / "whole", tmp_path / "split"
+    result = run_parmps([case, "-o", whole, "--end-time", "0.2"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    result = run_parmps([case, "-o", split, "--end-time", "0.2", "--max-steps", "80"],
+                        timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert read_frame(split / "result.h5")["step"] == 80
+    # Continued with its own limit the run has no step left; with none it goes on.
+    result = run_parmps(["--restart", split], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert read_frame(split / "result.h5")["step"] == 80
+    result = run_parmps(["--restart", split, "--max-steps", "0"], timeout=120)
+    assert result.returncode == 0, result.stderr[-2000:]
+    a, b = read_frame(whole / "result.h5"), read_frame(split / "result.h5")
+    assert a["step"] == b["step"] == 200
+    assert np.abs(a["position"] - b["position"]).max() < 1e-12
+
+    for args in ([case, "--max-steps", "-3"], ["--restart", split, "--max-steps", "many"]):
+        result = run_parmps(args, timeout=60)
+        assert result.returncode == 2, result.stderr
+        lines = error_lines(result.stderr)
+        assert len(lines) == 1 and "--max-steps" in lines[0], result.stderr
