@@ -5,7 +5,9 @@ the skin) and the pressure matrix. The sums at the predicted positions run over 
 cut from the search's list (within the number density's and the Laplacian's radii; one
 list when the two radii are the same, as in 3D by default), so the search's list is let go
 once the source has read it, before the matrix is assembled, unless the shift reads it
-after the correction (docs/performance.md, memory in 3D).
+after the correction (docs/performance.md, memory in 3D). And where the step's arrays come
+from: the heap, unless the environment's glibc malloc settings say otherwise
+(docs/performance.md, "The heap that never shrinks").
 """
 
 import os
@@ -84,8 +86,6 @@ def test_the_matrix_is_assembled_without_the_search_list_over_its_sub_list(monke
 def test_the_search_list_stays_while_the_shift_reads_it(monkeypatch):
     _, seen, _, _ = _one_step(monkeypatch, "hydrostatic.toml", ['mps.shifting="fickian"'])
     assert seen["search_alive"]
-
-
 
 
 # A fresh interpreter: where a large array lives once PETSc's libraries are loaded, before
