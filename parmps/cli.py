@@ -104,12 +104,10 @@ def _step_count(text):
 def _override_limits(raw, args):
     """Apply --end-time and --max-steps to the raw case; whether either was given."""
     given = False
-    if getattr(args, "end_time", None) is not None:
-        raw.setdefault("time", {})["end"] = args.end_time
-        given = True
-    if getattr(args, "max_steps", None) is not None:
-        raw.setdefault("time", {})["max_steps"] = args.max_steps
-        given = True
+    for key, value in (("end", args.end_time), ("max_steps", args.max_steps)):
+        if value is not None:
+            raw.setdefault("time", {})[key] = value
+            given = True
     return given
 
 
