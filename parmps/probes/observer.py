@@ -205,7 +205,7 @@ class Probes(Observer):
                                  f"[{UNITS[probe.kind]}], time [s]\n{columns}\n")
                     if self.resumed:
                         # A continued run: the rows up to its checkpoint, from result.h5.
-                        # (None yet when the run stopped before the probe's first sample.)
+                        # (No row when the run stopped before the probe's first sample.)
                         self._write_rows(handle, series.datasets["time"][:series.rows],
                                          series.datasets["value"][:series.rows])
 
