@@ -569,6 +569,8 @@ def pressure_matrix(PETSc, comm, owned, other):
         csr = petsc_types(owned)
     matrix = PETSc.Mat().createAIJWithArrays(
         size=((n_local, PETSc.DETERMINE), (n_local, PETSc.DETERMINE)), csr=csr, comm=comm)
+    # PETSc returns it assembled; assembled again all the same: without this the matrix's
+    # making and the solves measured slower (3D, 289k, 2 ranks; docs/performance.md).
     matrix.assemble()
     matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
     matrix.setOption(PETSc.Mat.Option.STRUCTURALLY_SYMMETRIC, True)
