@@ -17,6 +17,7 @@ without the prefix (``-log_view``) go to PETSc itself at start-up.
 
 import contextlib
 import ctypes
+import functools
 import glob
 import logging
 import math
@@ -231,11 +232,15 @@ class PressureSolver:
         self.iterations_since_setup = 0
         self.last_iterations = 0
         self.setups = 0
-        # The matrix the preconditioner was last set up on (see solve), and the layout of
-        # its rows: their ids in row order on this rank and its first row.
+        # The matrix the preconditioner was last set up on, held while the preconditioner
+        # applies it (not GAMG's, see _let_go), its diagonal, and the layout of its rows:
+        # their ids in row order on this rank and its first row.
         self.setup_matrix = None
+        self.setup_diagonal = None
         self.setup_ids = None
         self.setup_first = 0
+        # Where GAMG's finest level points between solves (a matrix of no entries).
+        self.placeholder = None
         # The ids of the rows the last solve had, and, while they are not the set-up's,
         # the preconditioner that matches them to it and this step's KSP around it.
         self.layout_ids = None
@@ -369,7 +374,7 @@ class PressureSolver:
             # The set-up this matrix defeated is not kept for the next step's.
             self.fresh_iterations = None
         solution = x.getArray().copy()
-        self._keep_setup_matrix(matrix, reuse)
+        self._let_go(matrix, reuse)
         for item in (b, x):
             item.destroy()
         del csr
@@ -424,21 +429,69 @@ class PressureSolver:
                         failed[1], iterations)
         return reason, iterations, residual
 
-    def _keep_setup_matrix(self, matrix, reuse):
-        """After a solve, hold the matrix the preconditioner was set up on and let this
-        step's go. GAMG's finest smoother applies the set-up's matrix until the next
-        set-up, so it stays alive anyway; the KSP, though, held each step's matrix, and
-        its arrays, until the next step's replaced it. Pointed back at the set-up's, it
-        lets this one go now: one matrix fewer alive while the next is assembled and its
-        preconditioner set up (3D at 3.1 l0: 12 bytes an entry, some 80 entries a row).
-        A KSP made for a later layout of the rows goes with it (a new one each step)."""
+    def _let_go(self, matrix, reuse):
+        """After a solve, let this step's matrix go, and the set-up's where nothing applies it.
+
+        GAMG applies a matrix only on its finest level (the smoother and the residual); its
+        coarser levels, made by the set-up, are their own. So once set up it needs no
+        matrix between solves: its finest level, and the KSP, are pointed at a matrix of no
+        entries (:meth:`_park`) and each solve points them at its own matrix, that of the
+        set-up's layout or, on a later layout, the step's seen through the rows' ids
+        (:class:`parmps.fluid.relaid.RelaidPreconditioner`). At no time are two systems'
+        matrices alive: the step's is assembled and its preconditioner set up or applied
+        with no other beside it (3D at 2.3 l0: 12 bytes an entry, some 40 entries a row;
+        the peak at 972k particles on 2 ranks, 3.0 kB a particle with the set-up's matrix
+        held, 2.5 kB without). The smoother's Jacobi diagonal is the step's, its Chebyshev
+        bounds the set-up's.
+
+        Other preconditioners may apply the set-up's matrix itself (SOR does): the KSP holds
+        that one, and lets each step's go."""
         self._drop_relaid_ksp()
+        if self.relaid is not None:
+            self.relaid.use(None)
         if not reuse:
             self._release_setup_matrix()
-            self.setup_matrix = matrix
-            return
-        self.ksp.setOperators(self.setup_matrix)
+            self._keep_setup_diagonal(matrix)
+            if self._parks():
+                unpin_finest_matrix(self.PETSc, self.ksp.getPC())
+                self._make_placeholder()
+            else:
+                self.setup_matrix = matrix
+                return
+        if self._parks():
+            self._park()
+        else:
+            self.ksp.setOperators(self.setup_matrix)
         matrix.destroy()
+
+    def _parks(self):
+        """Whether the preconditioner needs no matrix between solves: GAMG with more than
+        one level (a single level is a direct solve of the set-up's matrix)."""
+        pc = self.ksp.getPC()
+        return pc.getType() == self.PETSc.PC.Type.GAMG and pc.getMGLevels() > 1
+
+    def _keep_setup_diagonal(self, matrix):
+        # The set-up's diagonal: a row of the set-up the later layout has lost keeps it.
+        if self.setup_diagonal is not None:
+            self.setup_diagonal.destroy()
+        self.setup_diagonal = matrix.getDiagonal()
+
+    def _make_placeholder(self):
+        """A matrix of the set-up's sizes with no entries; made at each set-up, which every
+        rank does together (making it is collective)."""
+        if self.placeholder is not None:
+            self.placeholder.destroy()
+        sizes = (self.setup_diagonal.getSizes(),) * 2
+        self.placeholder = self.PETSc.Mat().create(comm=self.comm)
+        self.placeholder.setSizes(sizes)
+        self.placeholder.setType(self.PETSc.Mat.Type.SHELL)
+        self.placeholder.setUp()
+
+    def _park(self):
+        """Point the KSP and GAMG's finest level at the placeholder, so that nothing PETSc
+        holds keeps a system's matrix alive."""
+        self.ksp.setOperators(self.placeholder)
+        point_finest_level(self.PETSc, self.ksp.getPC(), self.placeholder)
 
     def _release_setup_matrix(self):
         if self.setup_matrix is not None:
@@ -461,12 +514,15 @@ class PressureSolver:
             self.layout_ids = ids.copy()
             if reuse:
                 self.relaid = RelaidPreconditioner(
-                    self.PETSc, self.comm, self.ksp.getPC(), self.setup_matrix,
-                    self.setup_ids, self.setup_first, ids, matrix)
+                    self.PETSc, self.comm, self.ksp.getPC(), self.setup_diagonal,
+                    self.setup_ids, self.setup_first, ids, matrix,
+                    finest_level=self._parks())
         if reuse:
             if self.relaid is None:
                 return self.ksp
             self.relaid.use(matrix)
+            if self.relaid.operator is not None:
+                point_finest_level(self.PETSc, self.ksp.getPC(), self.relaid.operator)
             self.relaid_ksp = self._make_ksp()
             pc = self.relaid_ksp.getPC()
             pc.setType(self.PETSc.PC.Type.PYTHON)
@@ -504,6 +560,10 @@ class PressureSolver:
         the rest of the options."""
         ksp.getPC().setReusePreconditioner(reuse)
         ksp.setOperators(matrix)
+        if ksp is self.ksp and self._parks():
+            # The kept hierarchy's finest level applies this step's matrix; before a
+            # set-up, the set-up takes the KSP's for it.
+            point_finest_level(self.PETSc, ksp.getPC(), matrix)
         x.getArray()[:] = guess
         with self._options_inserted(report_unused=report_unused):
             ksp.solve(b, x)
@@ -525,6 +585,41 @@ class PressureSolver:
         self._drop_relaid()
         self.ksp.destroy()
         self._release_setup_matrix()
+        for item in (self.setup_diagonal, self.placeholder):
+            if item is not None:
+                item.destroy()
+
+
+@functools.lru_cache(maxsize=None)
+def _library(PETSc):
+    """PETSc's C library, for the calls petsc4py does not wrap."""
+    return ctypes.CDLL(PETSc.__file__)
+
+
+def point_finest_level(PETSc, pc, matrix):
+    """Make the finest level of a set-up multigrid preconditioner ``pc`` apply ``matrix``:
+    its smoother (whose Jacobi diagonal is then ``matrix``'s) and its residual."""
+    finest = pc.getMGLevels() - 1
+    pc.getMGSmoother(finest).setOperators(matrix)
+    residual = _library(PETSc).PCMGSetResidual
+    residual.argtypes = (ctypes.c_void_p, ctypes.c_int, ctypes.c_void_p, ctypes.c_void_p)
+    _check(PETSc, residual(pc.handle, finest, None, matrix.handle))
+
+
+def unpin_finest_matrix(PETSc, pc):
+    """After GAMG's set-up: the Galerkin product that made the next level keeps the finest
+    matrix, to redo the product with it; a later set-up makes its own, so let it go."""
+    levels = pc.getMGLevels()
+    coarse = pc.getMGSmoother(levels - 2).getOperators()[0]
+    clear = _library(PETSc).MatProductClear
+    clear.argtypes = (ctypes.c_void_p,)
+    _check(PETSc, clear(coarse.handle))
+
+
+def _check(PETSc, error):
+    """Raise PETSc's error for a C call's nonzero return, as petsc4py does."""
+    if error:
+        raise PETSc.Error(error)
 
 
 def pressure_matrix(PETSc, comm, owned, other):

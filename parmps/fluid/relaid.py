@@ -12,6 +12,12 @@ the set-up's layout (new since) is preconditioned by its diagonal alone. The ope
 ``S^T M S + D^-1`` on the rows not matched, with S the matching and M the kept
 preconditioner: symmetric and positive whenever M is, as CG needs. For the rows that stayed
 where they were it is M itself.
+
+A kept GAMG hierarchy applies a matrix on its finest level only (its smoother and residual),
+and holds none between solves (:meth:`parmps.fluid.ppe.PressureSolver._let_go`): on a later
+layout that level applies this step's matrix seen in the set-up's layout, ``S A S^T`` on the
+rows matched and the set-up's own diagonal on the rows that have none now
+(:class:`OnSetupLayout`), symmetric and positive as A is.
 """
 
 import numpy as np
@@ -19,12 +25,14 @@ import numpy as np
 
 class RelaidPreconditioner:
     """PETSc's Python-PC context: ``setup_pc`` (set up on the layout whose rows, rank by rank,
-    were ``setup_ids`` from global row ``setup_first``) applied to the rows ``ids`` of a new
-    layout, ``matrix`` the new layout's matrix (its diagonal for the unmatched rows).
+    were ``setup_ids`` from global row ``setup_first``, and whose matrix's diagonal was
+    ``setup_diagonal``) applied to the rows ``ids`` of a new layout, ``matrix`` the new
+    layout's matrix (its diagonal for the unmatched rows). With ``finest_level``, ``operator``
+    is this step's matrix in the set-up's layout, for the set-up's finest level to apply.
     Collective: every rank makes it together."""
 
-    def __init__(self, PETSc, comm, setup_pc, setup_matrix, setup_ids, setup_first, ids,
-                 matrix):
+    def __init__(self, PETSc, comm, setup_pc, setup_diagonal, setup_ids, setup_first, ids,
+                 matrix, finest_level=False):
         self.PETSc = PETSc
         self.pc = setup_pc
         # Applied as it was set up, whatever matrix its KSP points at.
@@ -32,7 +40,7 @@ class RelaidPreconditioner:
         old_rows = setup_rows_of(PETSc, comm, setup_ids, setup_first, ids)
         first = matrix.getOwnershipRange()[0]
         matched = old_rows >= 0
-        self.x_old, self.y_old = setup_matrix.createVecs()
+        self.x_old, self.y_old = setup_diagonal.duplicate(), setup_diagonal.duplicate()
         x_new = matrix.createVecLeft()
         index_type = PETSc.IntType
         to_new = PETSc.IS().createGeneral(
@@ -45,10 +53,21 @@ class RelaidPreconditioner:
         # A vector is made on every rank or none (collective).
         any_unmatched = comm.allreduce(int(self.unmatched.any())) > 0
         self.jacobi = matrix.createVecLeft() if any_unmatched else None
+        self.on_setup_layout = None
+        self.operator = None
+        if finest_level:
+            self.on_setup_layout = OnSetupLayout(PETSc, self.scatter, setup_diagonal, matrix)
+            sizes = setup_diagonal.getSizes()
+            self.operator = PETSc.Mat().createPython(
+                (sizes, sizes), self.on_setup_layout, comm=comm)
+            self.operator.setUp()
 
     def use(self, matrix):
-        """This step's matrix (the same layout): its diagonal for the unmatched rows."""
-        if self.jacobi is not None:
+        """This step's matrix (the same layout): its diagonal for the unmatched rows, and the
+        operator's matrix; None once the step is done with it."""
+        if self.on_setup_layout is not None:
+            self.on_setup_layout.matrix = matrix
+        if matrix is not None and self.jacobi is not None:
             matrix.getDiagonal(self.jacobi)
             array = self.jacobi.getArray()
             inverse = np.zeros_like(array)
@@ -72,9 +91,53 @@ class RelaidPreconditioner:
     def release(self):
         """Free the PETSc objects (not ``destroy``: PETSc calls that of a Python PC's context
         when its PC goes, and this one outlives the PCs it serves)."""
-        for item in (self.scatter, self.x_old, self.y_old, self.jacobi):
+        for item in (self.scatter, self.x_old, self.y_old, self.jacobi, self.operator):
             if item is not None:
                 item.destroy()
+        if self.on_setup_layout is not None:
+            self.on_setup_layout.release()
+
+
+class OnSetupLayout:
+    """PETSc's Python-matrix context: the step's ``matrix`` (a later layout) seen in the
+    set-up's layout through ``scatter`` (later layout -> set-up's, forward), ``S A S^T`` on
+    the set-up's rows matched now and ``setup_diagonal`` on those unmatched."""
+
+    def __init__(self, PETSc, scatter, setup_diagonal, matrix):
+        self.PETSc = PETSc
+        self.scatter = scatter
+        self.matrix = matrix
+        self.x_new, self.y_new = matrix.createVecs()
+        # The set-up's diagonal on its rows that have no row now, 0 on the others.
+        ones, seen = matrix.createVecLeft(), setup_diagonal.duplicate()
+        ones.set(1.0)
+        seen.zeroEntries()
+        scatter.scatter(ones, seen, PETSc.InsertMode.INSERT_VALUES, PETSc.ScatterMode.FORWARD)
+        self.unmatched_diagonal = setup_diagonal.copy()
+        self.unmatched_diagonal.getArray()[seen.getArray() != 0.0] = 0.0
+        for item in (ones, seen):
+            item.destroy()
+
+    def mult(self, mat, x, y):
+        PETSc = self.PETSc
+        self.x_new.zeroEntries()
+        self.scatter.scatter(x, self.x_new, PETSc.InsertMode.INSERT_VALUES,
+                             PETSc.ScatterMode.REVERSE)
+        self.matrix.mult(self.x_new, self.y_new)
+        y.pointwiseMult(x, self.unmatched_diagonal)
+        self.scatter.scatter(self.y_new, y, PETSc.InsertMode.INSERT_VALUES,
+                             PETSc.ScatterMode.FORWARD)
+
+    def getDiagonal(self, mat, diagonal):
+        self.matrix.getDiagonal(self.y_new)
+        self.unmatched_diagonal.copy(diagonal)
+        self.scatter.scatter(self.y_new, diagonal, self.PETSc.InsertMode.INSERT_VALUES,
+                             self.PETSc.ScatterMode.FORWARD)
+
+    def release(self):
+        for item in (self.x_new, self.y_new, self.unmatched_diagonal):
+            item.destroy()
+        self.matrix = None
 
 
 def setup_rows_of(PETSc, comm, setup_ids, setup_first, ids):
