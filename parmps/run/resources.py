@@ -12,16 +12,16 @@ import os
 
 # Fitted to the peak resident memory of the dam breaks on 2 ranks (the interpreter and
 # libraries included; python -m parmps bench [--scene dam_break_3d] --particles 1000000
-# --ranks 2 --steps 10 --warmup 3 [--set mps.re_laplacian=R], 2026-11-28), per particle
+# --ranks 2 --steps 10 --warmup 3 [--set mps.re_laplacian=R], 2026-11-29), per particle
 # A + B x the lattice neighbours within the Laplacian's radius: the pairs the step holds at
-# its peak (the pressure solver's set-up) are the sub-lists within that radius and the
-# matrix's entries (12 bytes each) in the step's matrix, the set-up's and its hierarchy.
-# 2D, 1.01 M particles: 3,256 bytes a particle at 3.1 l0 (30 neighbours), 3,690 at 4.0
-# (50). 3D (SPHERIC, 972k): 3,063 at 2.3 l0 (51), 5,670 at 3.1 (125); at 2.93 M and 2.3 l0
-# 3,006. A 3D tank's dummies and dry walls hold no rows and no lists, so its share per
-# particle is smaller and per neighbour larger (denser coarse levels) than 2D's.
-_BYTES_PER_PARTICLE = {2: 2600, 3: 1260}
-_BYTES_PER_NEIGHBOUR = {2: 21.6, 3: 35.3}
+# its peak are the sub-lists within that radius, the step's matrix's entries (12 bytes
+# each) and the preconditioner's hierarchy (GAMG holds no other system's matrix).
+# 2D, 1.01 M particles: 2,345 bytes a particle at 3.1 l0 (30 neighbours), 3,037 at 4.0
+# (50). 3D (SPHERIC, 972k): 2,502 at 2.3 l0 (51), 4,288 at 3.1 (125); at 4.96 M and 2.3 l0
+# 2,572. A 3D tank's dummies and dry walls hold no rows and no lists, so its share per
+# particle is smaller than 2D's.
+_BYTES_PER_PARTICLE = {2: 1304, 3: 1269}
+_BYTES_PER_NEIGHBOUR = {2: 34.5, 3: 24.2}
 
 
 def particle_estimate(case):
