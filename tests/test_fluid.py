@@ -377,6 +377,15 @@ def _chain_rows(n, shift):
     return np.array(indptr), np.array(columns, np.int32), np.array(values)
 
 
+def _dense(indptr, columns, values):
+    """The CSR rows as a dense matrix."""
+    n = len(indptr) - 1
+    dense = np.zeros((n, n))
+    for row in range(n):
+        dense[row, columns[indptr[row]:indptr[row + 1]]] = values[indptr[row]:indptr[row + 1]]
+    return dense
+
+
 # One rank: no columns of other ranks.
 _NO_OTHER = (None, np.zeros(0, np.int32), np.zeros(0))
 
@@ -410,10 +419,7 @@ def test_a_kept_gamg_hierarchy_holds_no_matrix_between_solves():
     for step, shift in enumerate((0.10, 0.11, 0.12)):
         indptr, columns, values = _chain_rows(n, shift)
         rhs = np.sin(np.arange(n))
-        matrix = np.zeros((n, n))
-        for row in range(n):
-            matrix[row, columns[indptr[row]:indptr[row + 1]]] = values[indptr[row]:indptr[row + 1]]
-        expected = np.linalg.solve(matrix, rhs)
+        expected = np.linalg.solve(_dense(indptr, columns, values), rhs)
         alive.append(weakref.ref(values))
         p, _, _ = solver.solve((indptr, columns, values), _NO_OTHER, rhs, np.zeros(n), step,
                                np.arange(n))
@@ -450,11 +456,9 @@ def test_a_preconditioner_that_applies_the_set_ups_matrix_keeps_it():
         alive.append(weakref.ref(values))
         p, _, _ = solver.solve((indptr, columns, values), _NO_OTHER, rhs, np.zeros(n), step,
                                np.arange(n))
-        dense = np.zeros((n, n))
-        for row in range(n):
-            dense[row, columns[indptr[row]:indptr[row + 1]]] = values[indptr[row]:indptr[row + 1]]
-        assert np.linalg.norm(dense @ p - rhs) <= 1e-5 * np.linalg.norm(rhs)
-        del indptr, columns, values, dense
+        residual = _dense(indptr, columns, values) @ p - rhs
+        assert np.linalg.norm(residual) <= 1e-5 * np.linalg.norm(rhs)
+        del indptr, columns, values
     assert solver.setups == 1
     assert solver.ksp.getOperators()[0].handle == solver.setup_matrix.handle
     assert [ref() is not None for ref in alive] == [True, False, False]

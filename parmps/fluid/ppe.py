@@ -282,7 +282,7 @@ class PressureSolver:
     def _note_used(self, names):
         """Remember which options PETSc has read (its flag goes with the option's removal)."""
         flag = ctypes.c_int(0)
-        library = ctypes.CDLL(self.PETSc.__file__)
+        library = _library(self.PETSc)
         for name in names:
             library.PetscOptionsUsed(None, name.encode(), ctypes.byref(flag))
             if flag.value:
@@ -449,16 +449,17 @@ class PressureSolver:
         self._drop_relaid_ksp()
         if self.relaid is not None:
             self.relaid.use(None)
+        parks = self._parks()
         if not reuse:
             self._release_setup_matrix()
             self._keep_setup_diagonal(matrix)
-            if self._parks():
+            if parks:
                 unpin_finest_matrix(self.PETSc, self.ksp.getPC())
                 self._make_placeholder()
             else:
                 self.setup_matrix = matrix
                 return
-        if self._parks():
+        if parks:
             self._park()
         else:
             self.ksp.setOperators(self.setup_matrix)
