@@ -167,7 +167,12 @@ def _start(args, log_path):
 
 def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     output, log_path = tmp_path / "run", tmp_path / "run.log"
-    process, log = _start([CASES / "box_in_flow.toml", "-o", output], log_path)
+    # Far beyond the case's 2 s, so that the signal finds the run in its loop: the first
+    # progress line comes after some 5 s of wall time, and on a fast machine the case's own
+    # 2 s took 6.7 s in all, so the run had ended when the signal came.
+    end_time = 30.0
+    process, log = _start([CASES / "box_in_flow.toml", "-o", output, "--end-time", end_time],
+                          log_path)
     try:
         deadline = time.monotonic() + 300
         # Into the time loop, past the first step (and any compilation): a progress line.
@@ -194,7 +199,7 @@ def test_sigterm_to_mpirun_checkpoints_and_restart_finishes(tmp_path):
     assert frames and frames[0]["step"] == 0
     with h5py.File(output / "checkpoint.h5", "r") as handle:
         stopped = float(handle["state/run/time"][()])
-    assert 0.0 < stopped < 2.0
+    assert 0.0 < stopped < end_time
 
     end = stopped + 0.02
     result = run_parmps(["--restart", output, "--end-time", end], ranks=2, timeout=300)
