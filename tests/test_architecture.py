@@ -211,7 +211,7 @@ def test_the_coupling_feels_the_fluids_corrected_gradient():
     """With mps.gradient = "corrected", a body node feels -V times the gradient the fluid
     moves by, on a disordered arrangement where the corrected and the plain MPS gradients
     differ. (Before the schemes were shared, the coupling took the plain gradient.)"""
-    from parmps.coupling.weak import fluid_forces
+    from parmps.fluid.forces import fluid_forces
     case = _validated("\n[mps]\ngradient = \"corrected\"\n")
     case["fluid"]["viscosity"] = 0.0
     constants = MPSConstants.from_case(case)

@@ -20,7 +20,8 @@ from conftest import case_of, error_lines, run_parmps
 from parmps import open_result
 from parmps.core.particles import FLUID, SOLID, Particles
 from parmps.coupling.implicit_pressure import ImplicitPressureCoupling
-from parmps.coupling.weak import WeakCoupling, fluid_force_parts
+from parmps.coupling.weak import WeakCoupling
+from parmps.fluid.forces import fluid_force_parts
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.schemes import GRADIENTS, scheme_class
 from parmps.io.frames import read_frame

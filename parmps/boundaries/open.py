@@ -181,6 +181,7 @@ class OpenBoundaries(Participant):
         self.outflow_total = 0
 
     name = "open_boundaries"
+    exchanges_fluid = True
 
     def checkpoint_state(self):
         return {"created": np.array([inlet.created for inlet in self.inlets], np.int64),

@@ -32,7 +32,9 @@ import math
 import numpy as np
 
 from parmps.core.geometry import format_point
+from parmps.core.particles import FLUID, INFLOW
 from parmps.errors import CaseError
+from parmps.fluid.forces import pressure_force_from
 from parmps.fluid.participant import Participant
 
 SECTIONS = ("tank", "wall_box")
@@ -52,10 +54,21 @@ def moving_entries(case):
 
 
 class MovingWalls(Participant):
-    """The moving tanks and wall boxes of a case, each a block of global ids."""
+    """The moving tanks and wall boxes of a case, each a block of global ids.
+
+    ``fluid``: the fluid solver (its constants and gradient scheme), for the work the
+    walls do on the fluid; set once the solver exists."""
+
+    name = "moving_walls"
+    # The work the walls did on the fluid so far, summed over the ranks [J]: the pressure
+    # force of the walls' particles on the fluid in the symmetric pair form (the
+    # correction and the viscous force left out) times the walls' velocity.
+    DIAGNOSTICS = {"moving_wall_work": np.float64}
 
     def __init__(self, case, ids, origin, sources):
         """``ids``, ``origin`` and ``sources``: the global scene of :func:`scene.build`."""
+        self.fluid = None
+        self.work_done = 0.0  # this rank's share of the work on the fluid so far [J]
         self.walls = []
         for name, spec in moving_entries(case):
             members = ids[origin == sources.index(name)]
@@ -104,6 +117,38 @@ class MovingWalls(Participant):
 
     def before_exchange(self, particles, time, dt):
         self.advance(particles, time, dt)
+
+    def after_fluid(self, particles, time, dt, decomposition):
+        """Add the work the walls did on the fluid in the step: the pressure force their
+        particles exert on the owned fluid (:func:`pressure_force_from`) times the walls'
+        velocity and dt (collective while a wall moves)."""
+        moving = [(spec, low, high) for _, spec, low, high in self.walls
+                  if spec["move_start"] < time + dt and time < spec["move_end"]]
+        if not moving:
+            return particles
+        # The fluid step leaves ghost values of the start of the step.
+        decomposition.refresh([particles.position, particles.velocity, particles.pressure])
+        n = particles.n_owned
+        rows = np.flatnonzero(np.isin(particles.kind[:n], (FLUID, INFLOW)))
+        for spec, low, high in moving:
+            wall = (particles.id >= low) & (particles.id < high)
+            force = pressure_force_from(particles, rows, self.fluid.constants, wall)
+            velocity = (travel(spec, time + dt) - travel(spec, time)) / dt
+            self.work_done += dt * float(force.sum(axis=0) @ velocity)
+        return particles
+
+    def work(self):
+        return self.work_done
+
+    def diagnostics(self):
+        return {"moving_wall_work": self.fluid.comm.allreduce(self.work_done)}
+
+    def checkpoint_state(self):
+        return {"work": self.fluid.comm.allreduce(self.work_done)}
+
+    def restore_state(self, saved):
+        # One rank carries the total so far; the sum over the ranks is the total.
+        self.work_done = float(saved.get("work", 0.0)) if self.fluid.comm.rank == 0 else 0.0
 
     def particle_owner(self, particle_id):
         name = self.name_of(particle_id)

@@ -386,6 +386,37 @@ def pressure_gradient_sum(indptr, cols, position, pressure, has_pressure, radius
                                   n_rows, rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _pressure_share_sum(indptr, cols, position, pressure, share, radius, n_rows, d):
+    out = np.zeros((n_rows, d))
+    for i in range(n_rows):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not share[j]:
+                continue
+            r2 = pair_distance2(position, i, j, d)
+            w = _weight_of_r2(r2, radius)
+            if w > 0.0:
+                factor = (pressure[i] + pressure[j]) * w / r2
+                for k in range(d):
+                    out[i, k] += factor * pair_component(position, i, j, k)
+    return out
+
+
+@numba.njit(cache=True)
+def pressure_share_sum(indptr, cols, position, pressure, share, radius, n_rows):
+    """``sum_j (P_i + P_j) r_ij w / |r_ij|^2`` over the neighbours j in ``share`` (a mask over
+    the columns): the part of each row's gradient sum those neighbours exert, in the
+    symmetric pair form, whose pair forces are equal and opposite. On a full neighbourhood
+    it sums to the gradient's (``2 P_i sum_j r_ij w / r^2`` vanishes there), and across a
+    plane of uniform pressure P it gives P on the plane's area: the minimum-pressure form's
+    ``P_j - Pmin_i`` splits no force by neighbour, and ``P_j`` alone gives half of it."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _pressure_share_sum(indptr, cols, position, pressure, share, radius, n_rows, 2)
+    return _pressure_share_sum(indptr, cols, position, pressure, share, radius, n_rows, 3)
+
+
 # --- gradient correction ----------------------------------------------------------------------
 
 @numba.njit(cache=True)

@@ -40,7 +40,8 @@ coupling's unchanged.
 import numpy as np
 
 from parmps.core.particles import SOLID
-from parmps.coupling.weak import WeakCoupling, fluid_force_parts
+from parmps.coupling.weak import WeakCoupling
+from parmps.fluid.forces import fluid_force_parts
 
 
 class ImplicitPressureCoupling(WeakCoupling):

@@ -54,12 +54,10 @@ import logging
 import numpy as np
 from mpi4py import MPI
 
-from parmps.core import kernels
 from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
-from parmps.core.lattice import neighbour_count_reference
-from parmps.core.neighbours import pair_list
-from parmps.core.particles import DUMMY, SOLID, owned_fluid_in_box
+from parmps.core.particles import SOLID, owned_fluid_in_box
 from parmps.errors import RunFailure
+from parmps.fluid.forces import fluid_forces
 from parmps.fluid.participant import Participant
 
 log = logging.getLogger(__name__)
@@ -71,65 +69,6 @@ HOLD_DEPTH = 0.25
 # Particles are given a side within this many spacings of a shell's box: one moves less
 # than a spacing a step (time.cfl <= 1), so one that crosses has a side before and after.
 SIDE_BAND = 2.0
-
-
-def fluid_forces(particles, rows, constants, gradient):
-    """Fluid force on the particles ``rows`` (owned): ``-V grad P + V mu lap u``.
-
-    ``particles`` must have current ghosts (positions, velocities, pressures);
-    ``constants`` are the fluid's MPS constants and ``gradient`` its pressure
-    gradient scheme, so a body feels the gradient that moves the fluid.
-    Returns (len(rows), d).
-    """
-    pressure_force, viscous_force, _ = fluid_force_parts(particles, rows, constants, gradient)
-    return pressure_force + viscous_force
-
-
-def fluid_force_parts(particles, rows, constants, gradient):
-    """The pressure force ``-V grad P`` and the viscous force ``V mu lap u`` on ``rows``,
-    and each row's viscous relaxation rate for a particle of the fluid's density.
-
-    The viscous force is ``k_i (u_bar_i - u_i)`` with u_bar the weighted mean of
-    the neighbours' velocities; the rate returned is k_i / (rho V) =
-    ``nu 2d/(lambda0 n0) sum_j w_ij`` [1/s] (how fast that force would relax
-    the velocity of a particle of the fluid's density). Returns ((n, d), (n, d), (n,)).
-    """
-    dimension = particles.position.shape[1]
-    n = len(rows)
-    if n == 0:
-        return np.empty((0, dimension)), np.empty((0, dimension)), np.empty(0)
-    # Put the rows first so the pair search produces exactly their lists; only particles
-    # within the rows' reach can be their neighbours, so the search sees no others (a
-    # body's nodes are a few percent of a tank's particles).
-    reach = constants.re_laplacian
-    at_rows = particles.position[rows]
-    others = np.all((particles.position >= at_rows.min(axis=0) - reach)
-                    & (particles.position <= at_rows.max(axis=0) + reach), axis=1)
-    others[rows] = False
-    order = np.concatenate([rows, np.flatnonzero(others)])
-    position = np.ascontiguousarray(particles.position[order])
-    # Room for a lattice's neighbours and a little more, so the search runs once (a 3D
-    # search costs as much as the rest of this function).
-    room = int(1.2 * n * neighbour_count_reference(constants.spacing, reach, dimension)) + 64
-    indptr, cols = pair_list(position, reach, n_rows=n, expected_pairs=room)
-    pressure = particles.pressure[order]
-    has_pressure = particles.kind[order] != DUMMY
-    volume = constants.spacing ** dimension
-    pressure_force = -volume * gradient.gradient(indptr, cols, position, pressure,
-                                                 has_pressure, n)
-    viscous_force = np.zeros((n, dimension))
-    viscous_rate = np.zeros(n)
-    if constants.viscosity > 0.0:
-        # The compiled sums the fluid's own viscous term uses (numpy over the pairs cost
-        # most of this function on a 10k-node body).
-        coefficient = 2.0 * dimension / (constants.lambda0 * constants.n0_laplacian)
-        velocity = np.ascontiguousarray(particles.velocity[order])
-        laplacian = coefficient * kernels.vector_laplacian_sum(indptr, cols, position,
-                                                               velocity, reach, n)
-        viscous_force = volume * constants.density * constants.viscosity * laplacian
-        viscous_rate = (constants.viscosity * coefficient
-                        * kernels.number_density(indptr, cols, position, reach, n)[0])
-    return pressure_force, viscous_force, viscous_rate
 
 
 # How far below 1 a density ratio must lie to be a light body, not rounding.
@@ -217,6 +156,8 @@ class WeakCoupling(Participant):
     # The fluid's answer reaches the nodes a step late: a body lighter than its added mass
     # is unstable (a scheme that puts the nodes' inertia into the pressure solve sets False).
     ANSWERS_A_STEP_LATE = True
+    # The bodies' kinetic, elastic and potential energy, which they trade with the fluid [J].
+    DIAGNOSTICS = {"body_energy": np.float64}
 
     def __init__(self, model, comm, fluid):
         self.model = model
@@ -369,6 +310,12 @@ class WeakCoupling(Participant):
             particles.position[index] = position
             particles.velocity[index] = velocity
         return self.comm.allreduce(len(index), op=MPI.SUM)
+
+    def mechanical_energy(self):
+        return self.model.mechanical_energy()
+
+    def diagnostics(self):
+        return {"body_energy": self.mechanical_energy()}
 
     def node_substeps(self, dt):
         """Each rank's node-substeps in a step of dt: a body's nodes times its substeps, on

@@ -29,6 +29,13 @@ over [time, until): the step must respect it like the fluid's. ``DIAGNOSTICS``
 and ``diagnostics()`` add columns to the run's diagnostics;
 ``particle_owner(pid)`` names the geometry a particle belongs to and what to
 do about it, for messages: ``(description, advice)`` or None.
+``work()``: this rank's share of the work the participant has done on the fluid so far
+[J] (a moving wall's force times its velocity), not reduced over the ranks; and
+``exchanges_fluid``: True for a participant whose ``after_fluid`` adds fluid particles or
+takes them away (open boundaries), the energy they carry then counted by the stepper. The
+energy check of :mod:`parmps.fluid.energy` counts neither as a source. ``mechanical_energy()``: the
+energy the participant's own bodies hold (kinetic, elastic and potential, the same on
+every rank), which the fluid trades with them.
 ``node_substeps(dt)``: the bodies' node-substeps each rank will run in a step of
 dt (an array over the ranks, the same on every rank), or None: work beyond the
 rank's particles, which the decomposition's balance counts
@@ -44,6 +51,7 @@ of arrays and scalars, the same on every rank) and ``restore_state(saved)``
 class Participant:
     DIAGNOSTICS = {}  # column name -> numpy dtype
     name = None  # the group of its checkpoint state; None: it has none
+    exchanges_fluid = False  # adds or removes fluid particles in after_fluid
 
     def checkpoint_state(self):
         return {}
@@ -80,3 +88,9 @@ class Participant:
 
     def node_substeps(self, dt):
         return None
+
+    def work(self):
+        return 0.0
+
+    def mechanical_energy(self):
+        return 0.0

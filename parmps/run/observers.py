@@ -17,6 +17,7 @@ import logging
 
 import numpy as np
 
+from parmps.core.particles import FLUID
 from parmps.io.series import Series
 from parmps.run.schedule import SimulatedInterval, WallInterval
 
@@ -157,6 +158,75 @@ class Frames(Observer):
         if self.cadence.due(state.time) and self.write_particles:
             self.writer.write(state.step, state.time, state.dt, state.particles)
             self.writer.publish()
+
+
+class EnergyWatch(Observer):
+    """A warning, once, when the mechanical energy of the fluid and its bodies rises between
+    two outputs by more than ``tolerance`` of the fluid's initial energy, beyond the work
+    that inlets, outlets and moving walls did on it (docs/design.md §1.8): with fixed walls
+    the energy can only fall, so a rise is a numerical source. The warning names the step,
+    the time and the fastest fluid particle, where such a source shows first."""
+
+    name = "energy_watch"
+
+    def __init__(self, comm, interval, end_time, tolerance=0.01):
+        self.comm = comm
+        self.cadence = SimulatedInterval(interval, end_time)
+        self.tolerance = tolerance
+        self.initial = None  # the fluid's energy after the first step
+        self.last = None  # the budget at the last output
+        self.warned = False
+
+    def checkpoint_state(self):
+        return {"initial": np.nan if self.initial is None else self.initial,
+                "last": np.nan if self.last is None else self.last,
+                "warned": int(self.warned), "next_time": self.cadence.next_time}
+
+    def restore_state(self, saved):
+        self.initial = None if np.isnan(saved["initial"]) else float(saved["initial"])
+        self.last = None if np.isnan(saved["last"]) else float(saved["last"])
+        self.warned = bool(saved["warned"])
+        self.cadence.next_time = float(saved["next_time"])
+
+    def observe(self, state):
+        row = state.diagnostics
+        if "fluid_energy" not in row:
+            return
+        budget = row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+        if self.initial is None:
+            self.initial, self.last = row["fluid_energy"], budget
+        if not self.cadence.due(state.time):
+            return
+        rise = budget - self.last
+        self.last = budget
+        if self.warned or not rise > self.tolerance * abs(self.initial):
+            return
+        self.warned = True
+        where = fastest_fluid(state.particles, self.comm)
+        if self.comm.rank == 0:
+            log.warning("step %d, t = %.6g s: the mechanical energy of the fluid%s rose by "
+                        "%.3g %% of its initial value since the last output with no work "
+                        "done on it: a numerical source (docs/design.md §1.8)%s",
+                        state.step, state.time, " and its bodies" if "body_energy" in row
+                        else "", 100.0 * rise / abs(self.initial), where)
+
+
+def fastest_fluid(particles, comm):
+    """", the fastest fluid particle N at (x, y) moving at V m/s" (collective), or ""."""
+    n = particles.n_owned
+    fluid = np.flatnonzero(particles.kind[:n] == FLUID)
+    best = None
+    if len(fluid):
+        speed = np.einsum("ij,ij->i", particles.velocity[fluid], particles.velocity[fluid])
+        i = fluid[np.argmax(speed)]
+        best = (float(np.sqrt(speed.max())), -int(particles.id[i]),
+                tuple(float(x) for x in particles.position[i]))
+    found = [item for item in comm.allgather(best) if item is not None]
+    if not found:
+        return ""
+    speed, pid, where = max(found)
+    place = ", ".join(f"{x:.4g}" for x in where)
+    return f"; the fastest fluid particle, {-pid}, is at ({place}) moving at {speed:.3g} m/s"
 
 
 class Progress(Observer):

@@ -99,6 +99,8 @@ class Simulation:
             global_scene if self.checkpoint is None else self.checkpoint.particles)
         self.decomposition.log_choice()
         self.fluid = FluidSolver(case, comm, self.decomposition)
+        if moving_walls is not None:
+            moving_walls.fluid = self.fluid
         if self.model is not None:
             from parmps.coupling import coupling_scheme
             self.coupling = coupling_scheme(case, self.model, comm, self.fluid)
@@ -162,6 +164,8 @@ class Simulation:
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)
+        if self.decomposition is not None:
+            found.append(observing.EnergyWatch(self.comm, interval, self.end_time))
         found += [observing.Frames(writer, interval, self.end_time, case["output"]["frames"]),
                   observing.Progress(self._progress_line)]
         return found

@@ -23,6 +23,7 @@ import numpy as np
 from parmps.core.geometry import outside_box
 from parmps.core.particles import FLUID
 from parmps.errors import RunFailure
+from parmps.fluid import energy
 from parmps.fluid.projection import check_finite, max_speed
 from parmps.run import guards
 from parmps.run.escaped import EscapedFluid
@@ -30,12 +31,22 @@ from parmps.run.timestep import Limit
 
 log = logging.getLogger(__name__)
 
+# A rise of the energy budget above its lowest value, over the initial energy, that a failure's
+# message names as its likely cause.
+ENERGY_RISE = 0.01
+
 
 class FluidStepper:
     """The particles' MPS step on a decomposition, with the step's participants."""
 
     DIAGNOSTICS = {"ksp_iterations": np.int64, "ksp_residual": np.float64,
                    "max_speed": np.float64, "kinetic_energy": np.float64,
+                   # the fluid's potential energy above the initial fluid's lowest point,
+                   # and kinetic plus potential [J, per metre of depth in 2D]
+                   "potential_energy": np.float64, "fluid_energy": np.float64,
+                   # cumulative energy the fluid was given by inlets, outlets, moving walls
+                   # and the removal of escaped fluid (negative: taken away) [J]
+                   "boundary_work": np.float64,
                    "n_fluid": np.int64,
                    # fluid particles that left the domain and were removed, cumulative
                    "n_escaped": np.int64,
@@ -63,23 +74,52 @@ class FluidStepper:
         self.fluid_speed = 0.0
         self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0}
         self.step_imbalance = 1.0
+        constants = fluid.constants
+        self.particle_mass = constants.density * constants.spacing ** constants.dimension
+        self.gravity = fluid.gravity
+        self.energy_datum = None  # set at the first start, kept by checkpoints
+        # The fluid's energy after the first step, and the lowest budget (fluid and bodies
+        # less the boundaries' work) since: a rise above it is a numerical source.
+        self.initial_energy = None
+        self.lowest_budget = None
+        # This rank's share of the energy fluid particles brought in when they joined the
+        # fluid (at an inlet) less what they took away (an outlet, escaped fluid) [J].
+        self.exchanged_energy = 0.0
 
     def checkpoint_state(self):
         """Every participant's state, by its name, and the escaped fluid's count (collective)."""
         saved = {p.name: p.checkpoint_state() for p in self.participants if p.name is not None}
         saved[self.escaped.name] = self.escaped.checkpoint_state()
+        saved["energy"] = {"datum": np.asarray(self.energy_datum, dtype=float),
+                           "exchanged": self.comm.allreduce(self.exchanged_energy),
+                           "initial": np.nan if self.initial_energy is None
+                           else self.initial_energy,
+                           "lowest": np.nan if self.lowest_budget is None
+                           else self.lowest_budget}
         return saved
 
     def restore_state(self, saved):
         for participant in self.participants:
             if participant.name is not None:
-                participant.restore_state(saved[participant.name])
+                # A checkpoint written before a participant kept state has none of it.
+                participant.restore_state(saved.get(participant.name, {}))
         # A checkpoint written before the count existed had removed none.
         self.escaped.restore_state(saved.get(self.escaped.name, {"total": 0}))
+        # A checkpoint written before the energy existed: the datum is taken at start.
+        if "energy" in saved:
+            self.energy_datum = np.asarray(saved["energy"]["datum"], dtype=float)
+            # One rank carries the total so far; the sum over the ranks is the total.
+            self.exchanged_energy = (float(saved["energy"]["exchanged"])
+                                     if self.comm.rank == 0 else 0.0)
+            if not np.isnan(saved["energy"]["initial"]):
+                self.initial_energy = float(saved["energy"]["initial"])
+                self.lowest_budget = float(saved["energy"]["lowest"])
 
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
         self.fluid_speed = max_speed(state.particles, self.comm)
+        if self.energy_datum is None:
+            self.energy_datum = energy.energy_datum(state.particles, self.gravity, self.comm)
         # The walls away from the water weigh as dummies in the balance from the first
         # step's cut on (the first update rebalances when they move the load past
         # parallel.base.FIRST_CUT_TOLERANCE).
@@ -136,7 +176,11 @@ class FluidStepper:
                 mobility = given if mobility is None else mobility * given
         self.stats = self.fluid.step(particles, dt, step, dirichlet, mobility)
         for participant in self.participants:
+            if participant.exchanges_fluid:
+                before = sum(self._fluid_energy(particles))
             particles = participant.after_fluid(particles, time, dt, self.decomposition)
+            if participant.exchanges_fluid:
+                self.exchanged_energy += sum(self._fluid_energy(particles)) - before
         state.particles = particles
 
     def _count_extra_work(self, dt):
@@ -157,8 +201,11 @@ class FluidStepper:
         check_finite(particles, comm, step)
         for participant in self.participants:
             participant.check(particles, step, state.time)
+        before = sum(self._fluid_energy(particles))
         particles, escaped_speed = self.escaped.apply(particles, step, state.time,
                                                       self.particle_owner)
+        if particles.n_owned != state.particles.n_owned:
+            self.exchanged_energy += sum(self._fluid_energy(particles)) - before
         state.particles = particles
         speed = max_speed(particles, comm)
         # The removed particles moved in this step too: one thrown out by a step too long
@@ -191,22 +238,53 @@ class FluidStepper:
         particles = state.particles
         n = particles.n_owned
         fluid = particles.kind[:n] == FLUID
-        constants = self.fluid.constants
-        kinetic = comm.allreduce(0.5 * constants.density * self.spacing ** 2 *
-                                 float((particles.velocity[:n][fluid] ** 2).sum()))
+        work = self.exchanged_energy + sum(p.work() for p in self.participants)
+        sums = np.array([*self._fluid_energy(particles, fluid), work,
+                         np.count_nonzero(fluid)])
+        kinetic, potential, work, n_fluid = comm.allreduce(sums)
         values = {"ksp_iterations": self.stats["ksp_iterations"],
                   "ksp_residual": self.stats["ksp_residual"],
                   "max_speed": self.fluid_speed, "kinetic_energy": kinetic,
-                  "n_fluid": comm.allreduce(int(np.count_nonzero(fluid))),
+                  "potential_energy": potential, "fluid_energy": kinetic + potential,
+                  "boundary_work": work,
+                  "n_fluid": int(n_fluid),
                   "n_escaped": self.escaped.total,
                   "imbalance": self.step_imbalance}
         for participant in self.participants:
             values.update(participant.diagnostics())
+        self._follow_budget(values["fluid_energy"], work)
         return values
+
+    def _follow_budget(self, fluid_energy, work):
+        budget = fluid_energy + sum(p.mechanical_energy() for p in self.participants) - work
+        if self.initial_energy is None:
+            self.initial_energy, self.lowest_budget = fluid_energy, budget
+        self.budget = budget
+        self.lowest_budget = min(self.lowest_budget, budget)
+
+    def energy_rise(self):
+        """How far the fluid's and bodies' energy, less the boundaries' work, has risen above
+        its lowest value so far, over the fluid's initial energy (0 before the first step)."""
+        if self.initial_energy is None or self.initial_energy == 0.0:
+            return 0.0
+        return (self.budget - self.lowest_budget) / abs(self.initial_energy)
+
+    def _fluid_energy(self, particles, mask=None):
+        """This rank's (kinetic, potential) energy of its owned fluid."""
+        return energy.fluid_energy(particles, self.particle_mass, self.gravity,
+                                   self.energy_datum, mask)
 
     def failure_cause(self, where=None):
         causes = [cause for cause in (p.failure_cause(where) for p in self.participants)
                   if cause is not None]
+        rise = self.energy_rise()
+        if rise > ENERGY_RISE:
+            # Fluid thrown out of the domain or through a wall by a numerical source: the
+            # domain and the walls are not what to change.
+            causes.append(f"the fluid's mechanical energy had risen by {100 * rise:.3g} % of "
+                          f"its initial value with no work done on it (a numerical source in "
+                          f"the pressure scheme, docs/design.md §1.8: mps.gradient, "
+                          f"mps.source, time.cfl)")
         return "; ".join(causes) or None
 
     def progress(self, state):
@@ -220,7 +298,8 @@ class SolidStepper:
     """Bodies alone: every rank advances every (small) body alike; rank 0 holds the nodes
     as its particles, for the frames."""
 
-    DIAGNOSTICS = {"max_speed": np.float64, "kinetic_energy": np.float64}
+    DIAGNOSTICS = {"max_speed": np.float64, "kinetic_energy": np.float64,
+                   "body_energy": np.float64}
 
     def __init__(self, case, comm, model):
         self.case = case
@@ -264,7 +343,8 @@ class SolidStepper:
 
     def diagnostics(self, state):
         return {"max_speed": self.model.max_speed(),
-                "kinetic_energy": self.model.kinetic_energy()}
+                "kinetic_energy": self.model.kinetic_energy(),
+                "body_energy": self.model.mechanical_energy()}
 
     def failure_cause(self, where=None):
         return None

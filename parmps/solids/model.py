@@ -99,6 +99,10 @@ class SolidModel:
     def kinetic_energy(self):
         raise NotImplementedError
 
+    def mechanical_energy(self):
+        """The bodies' kinetic, elastic and gravitational potential energy [J]."""
+        raise NotImplementedError
+
     def check(self, step, time):
         """Raise RunFailure if a body has blown up (the same verdict on every rank)."""
         raise NotImplementedError

@@ -343,6 +343,11 @@ class Body:
         return (kinetic_energy(self.velocity, self.mass),
                 spring_energy(self.position, self.springs, self.rest_length, self.stiffness))
 
+    def potential_energy(self):
+        """``-sum m g.x`` over the nodes that move (pinned nodes hold no energy)."""
+        free = ~self.pinned
+        return -float(self.mass[free] @ (self.position[free] @ self.gravity))
+
     def stability_limit(self):
         """The Verlet step limit of this body [s], from its highest frequency at rest.
 

@@ -166,6 +166,9 @@ class MassSpringModel(SolidModel):
     def kinetic_energy(self):
         return sum(body.energy()[0] for body in self.bodies)
 
+    def mechanical_energy(self):
+        return sum(sum(body.energy()) + body.potential_energy() for body in self.bodies)
+
     def series(self):
         return self.diagnostics()
 

@@ -1,0 +1,48 @@
+"""The fluid's mechanical energy: what a long run is checked by (docs/design.md §1.8).
+
+A free-surface flow with fixed walls and no inflow only loses mechanical energy (kinetic
+plus potential, the bodies' kinetic and elastic energy included): a rise that no inlet,
+outlet or moving wall paid for is a numerical source. Each fluid particle stands for the
+mass ``rho l0^d``; the potential energy is measured from a datum, the point of the initial
+fluid lowest along gravity, so a still column's energy is its own and a 1 % rise means 1 %
+of what the flow has to spend.
+"""
+
+import numpy as np
+
+from parmps.core.particles import FLUID
+
+
+def particle_energy(velocity, position, mass, gravity, datum):
+    """Kinetic and potential energy of the particles given (rows of ``velocity`` and
+    ``position``), each of mass ``mass``: ``(sum m |u|^2 / 2, -sum m g.(x - datum))``."""
+    kinetic = 0.5 * mass * float(np.einsum("ij,ij->", velocity, velocity))
+    potential = -mass * float(np.sum((position - datum) @ gravity))
+    return kinetic, potential
+
+
+def fluid_energy(particles, mass, gravity, datum, mask=None):
+    """This rank's ``(kinetic, potential)`` energy of its owned fluid particles (or of the
+    owned particles ``mask`` selects); not reduced over the ranks."""
+    n = particles.n_owned
+    if mask is None:
+        mask = particles.kind[:n] == FLUID
+    return particle_energy(particles.velocity[:n][mask], particles.position[:n][mask],
+                           mass, gravity, datum)
+
+
+def energy_datum(particles, gravity, comm):
+    """The owned fluid's lowest point along ``gravity`` over every rank (collective):
+    the origin of the potential energy. The origin itself, 0, where there is no gravity
+    or no fluid."""
+    from mpi4py import MPI
+    dimension = particles.position.shape[1]
+    g = np.linalg.norm(gravity)
+    if g == 0.0:
+        return np.zeros(dimension)
+    down = np.asarray(gravity, dtype=float) / g
+    n = particles.n_owned
+    fluid = particles.kind[:n] == FLUID
+    depth = float((particles.position[:n][fluid] @ down).max()) if fluid.any() else -np.inf
+    depth = comm.allreduce(depth, op=MPI.MAX)
+    return down * depth if np.isfinite(depth) else np.zeros(dimension)
