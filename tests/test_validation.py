@@ -189,6 +189,9 @@ def test_the_spheric_metric_reads_the_record_on_its_origins_clock():
                      for name in ("P5", "P6", "P7", "P8")})
     verdicts = check.verdicts(measured)
     assert len(verdicts) == 16 and all(v["pass"] for v in verdicts.values())
+    # The record's own clock's figures beside, not judged.
+    assert verdicts["P1.arrival_error"]["raw"] == 0.05
+    assert not any(v["raw_pass"] for v in verdicts.values())
 
 
 def test_the_spheric_plot_script_prints_windows_and_draws_a_section(tmp_path):
