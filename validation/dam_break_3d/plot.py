@@ -180,8 +180,9 @@ def plot(path, check, png):
         ax.set_ylabel("z [m]")
         ax.set_xlabel("t [s]")
     axes.flat[0].legend(fontsize=7)
+    end = min(6.0, float(analysis.read_probe(path, "P1")[0][-1]))  # a short run: its own span
     for ax in axes.flat:
-        ax.set_xlim(0.0, 6.0)
+        ax.set_xlim(0.0, end)
     case = analysis.result_case(path)
     figure.suptitle(f"SPHERIC Test 2, l0 = {case['particles']['spacing'] * 1000:.1f} mm "
                     f"(0.55/{0.55 / case['particles']['spacing']:.0f} m)")
