@@ -856,7 +856,7 @@ def record_delay(t_record, record, t_model, model, window, baseline=None, offset
         shifted = np.interp(t + delay, t_model, model, left=model[0])
         offset = float(np.mean(y - shifted)) if fixed is None else float(fixed)
         residual = y - shifted - offset
-        return float(np.sum(residual ** 2)), offset, residual, shifted
+        return float(np.sum(residual ** 2)), offset, residual
 
     cost = np.array([fit(d)[0] for d in offsets])
     k = int(np.argmin(cost))
@@ -866,7 +866,7 @@ def record_delay(t_record, record, t_model, model, window, baseline=None, offset
         curvature = c0 - 2 * c1 + c2
         if curvature > 0:
             delay += 0.5 * (c0 - c2) / curvature * (offsets[k + 1] - offsets[k])
-    ssr, baseline, residual, _ = fit(delay)
+    ssr, baseline, residual = fit(delay)
     h = 1e-3
     slope = (np.interp(t + delay + h, t_model, model, left=model[0])
              - np.interp(t + delay - h, t_model, model, left=model[0])) / (2 * h)
@@ -881,8 +881,8 @@ def record_delay(t_record, record, t_model, model, window, baseline=None, offset
             "window": [float(window[0]), float(window[1])]}
 
 
-def _gauge_x(case, name):
-    """The x [m] of a level probe's line in a case."""
+def gauge_x(case, name):
+    """The x [m] of a level probe's line in a case (its first point's)."""
     for probe in case["probe"]:
         if probe["name"] == name:
             return float(probe["line"][0][0])
@@ -914,7 +914,7 @@ def record_origin_fits(record, results=(), gauges=("H4",), window=(0.0, 0.35),
         for name in gauges:
             t, level = read_probe(path, name)
             level = np.asarray(level, float).ravel()
-            inside = lower[0] <= _gauge_x(run_case, name) <= upper[0]
+            inside = lower[0] <= gauge_x(run_case, name) <= upper[0]
             fit = record_delay(record["t"], record[name], t, level, window,
                                baseline=(depth if inside else 0.0) - level[0])
             rows.append({"source": str(path), "spacing": run_case["particles"]["spacing"],
@@ -923,11 +923,11 @@ def record_origin_fits(record, results=(), gauges=("H4",), window=(0.0, 0.35),
         raise ValueError("record_origin_fits: give a case or at least one result")
     lower, upper = fluid_extent(case)
     depth, length = float(upper[-1] - lower[-1]), float(upper[0] - lower[0])
-    inside = [name for name in gauges if lower[0] < _gauge_x(case, name) <= upper[0]]
+    inside = [name for name in gauges if lower[0] < gauge_x(case, name) <= upper[0]]
     if not inside:
         return rows
     name = inside[0]
-    x = _gauge_x(case, name) - float(lower[0])
+    x = gauge_x(case, name) - float(lower[0])
     t = np.linspace(0.0, theory_window[1] + 0.3, 4001)
     level = incompressible_start_level(t, x, depth, length, gravity(case))
     fit = record_delay(record["t"], record[name], t, level, theory_window, baseline=0.0)

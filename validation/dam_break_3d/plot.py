@@ -262,7 +262,7 @@ def origin(paths, check, png=None):
         lower, upper = analysis.fluid_extent(case)
         tt = np.linspace(0.0, 0.12, 121)  # where the t^2 term holds (the runs: 0.07 s)
         ax.plot(tt, analysis.incompressible_start_level(
-            tt, analysis._gauge_x(case, "H4") - lower[0], upper[-1] - lower[-1],
+            tt, analysis.gauge_x(case, "H4") - lower[0], upper[-1] - lower[-1],
             upper[0] - lower[0], analysis.gravity(case)), "k--", lw=0.8,
             label="incompressible start, 0.55 + a t^2 / 2")
         ax.set_xlim(0.0, 0.45)
