@@ -705,27 +705,34 @@ def impact_pressure_metrics(path, case, references, arrival_threshold=0.2,
     return out
 
 
-def level_metrics(path, record, windows, wet_depth):
+def level_metrics(path, record, windows, wet_depth, record_origin=0.0):
     """Level probes against a record of the same gauges (``record``: time first, then a
     column per gauge [m]): per gauge, the first time deeper than ``wet_depth`` and the mean
-    depth over each of its ``windows``, simulated and measured."""
-    te = list(record.values())[0]
+    depth over each of its ``windows``, simulated and measured. The record's times are
+    read ``record_origin`` [s] later (its clock against the release:
+    :func:`sensor_pressure_metrics`); ``wet_measured_raw`` and ``mean_measured_raw`` are
+    the record's own clock's."""
+    raw = list(record.values())[0]
+    te = raw + record_origin
     out = {}
     for name, spans in windows.items():
         t, depth = read_probe(path, name)
         depth = np.asarray(depth, float).ravel()
         out[name] = {"wet": first_crossing(t, depth, wet_depth),
                      "wet_measured": first_crossing(te, record[name], wet_depth),
+                     "wet_measured_raw": first_crossing(raw, record[name], wet_depth),
                      "means": [{"window": [start, end],
                                 "mean": window_mean(t, depth, start, end),
-                                "mean_measured": window_mean(te, record[name], start, end)}
+                                "mean_measured": window_mean(te, record[name], start, end),
+                                "mean_measured_raw": window_mean(raw, record[name], start, end)}
                                for start, end in spans]}
     return out
 
 
 def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=500.0,
                             peak_width=0.01, peak_until=None, arrival_sensors=(),
-                            level_reference=None, level_windows=None, wet_depth=0.02):
+                            level_reference=None, level_windows=None, wet_depth=0.02,
+                            record_origin=0.0):
     """Pressure probes against a record of the same sensors in SI units (SPHERIC Test 2).
 
     ``reference``: a CSV whose first column is the time [s] and whose others are named
@@ -736,6 +743,12 @@ def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=50
     largest ``peak_width``-second running mean up to ``peak_until`` (default the run's
     end), with its time, beside the record's.
 
+    ``record_origin`` [s]: how long after an instant release the record's clock reads 0,
+    one constant for every sensor and gauge; the record's sample at ``t`` is compared with
+    the run's at ``t + record_origin``. The measured figures and the errors are on that
+    clock; each has its record's own clock's beside it (``..._raw``). ``record_origin_ms``
+    says which was used.
+
     With ``level_reference`` (a CSV of the same record's water depths, its columns named
     after the level probes) and ``level_windows`` (gauge name -> windows): per gauge, its
     ``wet`` time (the first depth above ``wet_depth`` [m]) and mean depth per window,
@@ -743,11 +756,12 @@ def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=50
     millimetres off before the release.
     """
     table = reference_table(reference)
-    te = list(table.values())[0]
-    out = {}
+    raw = list(table.values())[0]
+    te = raw + record_origin
+    out = {"record_origin_ms": 1000.0 * record_origin}
     if level_reference is not None and level_windows:
         out["levels"] = level_metrics(path, reference_table(level_reference), level_windows,
-                                      wet_depth)
+                                      wet_depth, record_origin)
     for name, spans in windows.items():
         t, p = read_probe(path, name)
         pe = table[name]
@@ -757,17 +771,168 @@ def sensor_pressure_metrics(path, case, reference, windows, arrival_threshold=50
         ke = int(np.argmax(np.where(te <= until, smooth_e, -np.inf)))
         row = {"peak": float(smooth[k]), "peak_time": float(t[k]),
                "peak_measured": float(smooth_e[ke]), "peak_time_measured": float(te[ke]),
+               "peak_time_measured_raw": float(raw[ke]),
                "nan_fraction": float(np.mean(~np.isfinite(p))), "means": []}
         for start, end in spans:
             # Dry samples carry no load on a wall: a NaN reading counts as 0 Pa.
             mean = window_mean(t, np.nan_to_num(p, nan=0.0), start, end)
             measured = window_mean(te, pe, start, end)
+            measured_raw = window_mean(raw, pe, start, end)
             row["means"].append({"window": [start, end], "mean": mean,
-                                 "mean_measured": measured,
-                                 "error": mean / measured - 1.0})
+                                 "mean_measured": measured, "error": mean / measured - 1.0,
+                                 "mean_measured_raw": measured_raw,
+                                 "error_raw": mean / measured_raw - 1.0})
         if name in arrival_sensors:
             row["arrival"] = first_crossing(t, p, arrival_threshold)
             row["arrival_measured"] = first_crossing(te, pe, arrival_threshold)
             row["arrival_error"] = row["arrival"] - row["arrival_measured"]
+            row["arrival_measured_raw"] = first_crossing(raw, pe, arrival_threshold)
+            row["arrival_error_raw"] = row["arrival"] - row["arrival_measured_raw"]
         out[name] = row
     return out
+
+
+# --------------------------------------------------------------------------
+# SPHERIC Test 2: the record's clock against an instant release
+
+def dam_break_surface_acceleration(x, depth, length, g, terms=400):
+    """The free surface's vertical acceleration [m/s^2] at the instant a door is removed from
+    a 2D column at rest, ``depth`` deep and ``length`` long against a wall, at distances
+    ``x`` [m] behind the door (0 <= x <= length): the potential-flow start, negative where the
+    surface falls.
+
+    The pressure at the first instant is harmonic, zero on the top and on the door's face,
+    with no normal acceleration on the floor and the wall; its series gives
+    ``a(x) = -g (4/pi) sum_n (-1)^n/(2n+1) cosh(k_n (length - x)) / cosh(k_n length)``,
+    ``k_n = (2n+1) pi / (2 depth)``: -g at the door, about -(4/pi) g exp(-pi x / (2 depth))
+    beyond a depth. The derivation: docs/validation/dam_break_3d.md.
+    """
+    x = np.asarray(x, float)
+    n = np.arange(terms)
+    k = (2 * n + 1) * np.pi / (2.0 * depth)
+    sign = np.where(n % 2 == 0, 1.0, -1.0) / (2 * n + 1)
+    xs = x[..., None]
+    # cosh(k (L - x)) / cosh(k L) without overflow
+    ratio = (np.exp(-k * xs) + np.exp(-k * (2.0 * length - xs))) / (1.0 + np.exp(-2.0 * k * length))
+    return -g * 4.0 / np.pi * np.sum(sign * ratio, axis=-1)
+
+
+def incompressible_start_level(t, x, depth, length, g):
+    """The water's depth [m] at times ``t`` [s] after an instant release, at ``x`` [m] behind
+    the door, to the first order of the small-time expansion: ``depth + a(x) t^2 / 2``
+    (:func:`dam_break_surface_acceleration`; ``depth`` before the release). Valid while the
+    surface has moved little against the depth (some 10 mm at 0.65 m behind a 0.55 m door)."""
+    t = np.asarray(t, float)
+    a = float(dam_break_surface_acceleration(x, depth, length, g))
+    return depth + 0.5 * a * np.where(t > 0, t, 0.0) ** 2
+
+
+def record_delay(t_record, record, t_model, model, window, baseline=None, offsets=None):
+    """The offset [s] between a record's clock and a model's of the same gauge: the record's
+    sample at ``t`` is the model's at ``t + delay`` (a positive delay: the record's clock
+    started after the model's release), fitted by least squares over the record's samples
+    in ``window`` = (start, end) [s]. ``baseline`` [m]: the record's reading less the
+    model's where both are right, a constant; None fits it beside the delay (over a short
+    window the two trade against each other: a falling curve shifted in time looks much
+    like one shifted in height).
+
+    The model is read by linear interpolation, at its first value before its first sample
+    (at rest). ``offsets``: the delays tried [s] (default -0.1 to 0.2 s by 0.5 ms); the best
+    is refined by a parabola through its neighbours. Returns ``delay``, ``baseline``, ``rms``
+    (the residual [m]), ``stderr`` (the delay's standard error from the residual, widened
+    for the residual's correlation from sample to sample) and ``samples``.
+    """
+    t_record, record = np.asarray(t_record, float), np.asarray(record, float).ravel()
+    t_model, model = np.asarray(t_model, float), np.asarray(model, float).ravel()
+    keep = (t_record >= window[0]) & (t_record <= window[1]) & np.isfinite(record)
+    t, y = t_record[keep], record[keep]
+    if len(t) < 4:
+        raise ValueError(f"record_delay: {len(t)} samples in the window {window}")
+    offsets = np.arange(-0.1, 0.2 + 1e-9, 5e-4) if offsets is None else np.asarray(offsets)
+
+    fixed = baseline
+
+    def fit(delay):
+        shifted = np.interp(t + delay, t_model, model, left=model[0])
+        offset = float(np.mean(y - shifted)) if fixed is None else float(fixed)
+        residual = y - shifted - offset
+        return float(np.sum(residual ** 2)), offset, residual
+
+    cost = np.array([fit(d)[0] for d in offsets])
+    k = int(np.argmin(cost))
+    delay = float(offsets[k])
+    if 0 < k < len(offsets) - 1:
+        c0, c1, c2 = cost[k - 1], cost[k], cost[k + 1]
+        curvature = c0 - 2 * c1 + c2
+        if curvature > 0:
+            delay += 0.5 * (c0 - c2) / curvature * (offsets[k + 1] - offsets[k])
+    ssr, baseline, residual = fit(delay)
+    h = 1e-3
+    slope = (np.interp(t + delay + h, t_model, model, left=model[0])
+             - np.interp(t + delay - h, t_model, model, left=model[0])) / (2 * h)
+    if fixed is None:
+        slope = slope - slope.mean()  # the baseline is fitted beside the delay
+    dof = max(len(t) - (2 if fixed is None else 1), 1)
+    variance = ssr / dof / max(float(np.sum(slope ** 2)), 1e-30)
+    rho = float(np.corrcoef(residual[:-1], residual[1:])[0, 1]) if len(t) > 4 else 0.0
+    rho = min(max(rho, 0.0), 0.95) if np.isfinite(rho) else 0.0
+    return {"delay": delay, "baseline": baseline, "rms": math.sqrt(ssr / len(t)),
+            "stderr": math.sqrt(variance * (1 + rho) / (1 - rho)), "samples": int(len(t)),
+            "window": [float(window[0]), float(window[1])]}
+
+
+def gauge_x(case, name):
+    """The x [m] of a level probe's line in a case (its first point's)."""
+    for probe in case["probe"]:
+        if probe["name"] == name:
+            return float(probe["line"][0][0])
+    raise KeyError(f"the case has no level probe '{name}'")
+
+
+def record_origin_fits(record, results=(), gauges=("H4",), window=(0.0, 0.35),
+                       theory_window=(0.0, 0.05), case=None):
+    """The record's clock against an instant release, from its level gauges (SPHERIC Test 2):
+    :func:`record_delay` of each of ``gauges`` of ``record`` (a level record as
+    :func:`reference_table` reads it) against the same gauge of each result file in
+    ``results`` over ``window`` [s], and of the first gauge against the incompressible start
+    (:func:`incompressible_start_level`) over ``theory_window``.
+
+    The record's gauge is taken to read the column's depth at rest, or zero outside the
+    column (the baseline fixed: the run's reading at rest, its first sample, stands for
+    that). The door is the fluid
+    block's face away from the tank's far wall: the lower x of the one fluid block; ``case``
+    (default the first result's) gives it, the depth and each gauge's x. Returns one row per
+    fit: ``source`` (the result's path or "incompressible start"), ``spacing``, ``gauge`` and
+    :func:`record_delay`'s figures.
+    """
+    rows = []
+    for path in results:
+        run_case = result_case(path)
+        case = case or run_case
+        lower, upper = fluid_extent(run_case)
+        depth = float(upper[-1] - lower[-1])
+        for name in gauges:
+            t, level = read_probe(path, name)
+            level = np.asarray(level, float).ravel()
+            inside = lower[0] <= gauge_x(run_case, name) <= upper[0]
+            fit = record_delay(record["t"], record[name], t, level, window,
+                               baseline=(depth if inside else 0.0) - level[0])
+            rows.append({"source": str(path), "spacing": run_case["particles"]["spacing"],
+                         "gauge": name, **fit})
+    if case is None:
+        raise ValueError("record_origin_fits: give a case or at least one result")
+    lower, upper = fluid_extent(case)
+    depth, length = float(upper[-1] - lower[-1]), float(upper[0] - lower[0])
+    inside = [name for name in gauges if lower[0] < gauge_x(case, name) <= upper[0]]
+    if not inside:
+        return rows
+    name = inside[0]
+    x = gauge_x(case, name) - float(lower[0])
+    t = np.linspace(0.0, theory_window[1] + 0.3, 4001)
+    level = incompressible_start_level(t, x, depth, length, gravity(case))
+    fit = record_delay(record["t"], record[name], t, level, theory_window, baseline=0.0)
+    rows.append({"source": "incompressible start", "spacing": 0.0, "gauge": name,
+                 "acceleration": float(dam_break_surface_acceleration(x, depth, length,
+                                                                      gravity(case))),
+                 **fit})
+    return rows

@@ -112,7 +112,8 @@ class Validation:
         pass}. A number bounds the absolute value, a pair [low, high] the value itself.
         ``[judge]`` maps a tolerance to the metric's name for it when they differ, or to a
         list of paths into a nested result (``"P1.means.0.error"``: keys, and indexes of
-        lists); with ``judged`` (a list of probes), each tolerance applies to every probe's
+        lists; a ``<path>_raw`` beside it, the figure against the record as published, is
+        shown as ``raw`` and ``raw_pass``, not judged); with ``judged`` (a list of probes), each tolerance applies to every probe's
         ``<name>_error``. Tolerances the metric does not measure (the tests judge those
         from the run) are left out."""
         verdicts = {}
@@ -125,6 +126,12 @@ class Validation:
                     value = _lookup(measured, path)
                     if isinstance(value, (int, float)):
                         verdicts[path] = _verdict(value, bound)
+                        raw = _lookup(measured, f"{path}_raw")
+                        if isinstance(raw, (int, float)):
+                            # The same figure against the record as published (its clock
+                            # not shifted): shown beside, not judged.
+                            beside = _verdict(raw, bound)
+                            verdicts[path].update(raw=beside["value"], raw_pass=beside["pass"])
             elif "judged" in self.tolerance:
                 for probe in self.tolerance["judged"]:
                     value = measured.get(probe, {}).get(f"{name}_error")
