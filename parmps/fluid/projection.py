@@ -289,6 +289,7 @@ class FluidSolver:
             cut[narrow] = self._cut(*cut[wide], s.position_star, narrow, s.n, "narrow")
         s.near_indptr, s.near_cols = cut[c.re_number_density]
         s.laplacian_indptr, s.laplacian_cols = cut[c.re_laplacian]
+        s.wide_indptr, s.wide_cols = cut[wide]
 
     def _cut(self, indptr, cols, position, radius, n, name):
         # 32-bit indices where a rank's particles allow (always, in practice): the sub-list
@@ -352,11 +353,10 @@ class FluidSolver:
 
     def _let_search_list_go(self, s):
         """Drop the search's pair list once the source has read it (at the start of the
-        step's positions), unless the shift reads it after the correction: the sub-lists
-        cut from it serve the rest, and without it the matrix, the step's largest
-        allocation, is assembled beside about half the pairs in 3D (docs/performance.md)."""
-        if not self.shifting.active:
-            s.indptr = s.cols = None
+        step's positions): the sub-lists cut from it serve the rest, the shift included,
+        and without it the matrix, the step's largest allocation, is assembled beside
+        about half the pairs in 3D (docs/performance.md)."""
+        s.indptr = s.cols = None
 
     def _solve(self, s, system, step_number):
         """The pressure of every local particle (0 off the rows; ghosts refreshed)."""
@@ -391,8 +391,11 @@ class FluidSolver:
         velocity_star[:n][moving] -= dt * correction
         position_star[:n][moving] -= dt * dt * correction
         if self.shifting.active:
-            self._shift(particles, s.indptr, s.cols, position_star, velocity_star, s.surface,
-                        dt)
+            # The wider sub-list, cut at the predicted positions: the correction moves a
+            # particle a fraction of a spacing, and a pair it brings within either radius
+            # enters at the edge, where the shift's weights vanish.
+            self._shift(particles, s.wide_indptr, s.wide_cols, position_star, velocity_star,
+                        s.surface, dt)
         particles.position[:n] = position_star[:n]
         particles.velocity[:n] = velocity_star[:n]
         particles.pressure[:n] = pressure[:n]

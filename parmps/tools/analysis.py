@@ -104,6 +104,52 @@ def column_time_scale(case):
 
 
 # --------------------------------------------------------------------------
+# Long runs: the mechanical energy and the particles' speeds
+
+def long_run_energy(path, case, report_at=(5.0, 10.0, 15.0, 20.0)):
+    """A violent run judged by what no wall or gravity can do: raise the fluid's energy.
+
+    From the diagnostics (docs/design.md §1.8): the budget ``fluid_energy + body_energy -
+    boundary_work`` at each frame's step, and ``energy_rise``, its largest rise from one frame
+    to the next over the fluid's initial energy E0; ``energy_end`` and ``energy_at`` (E/E0 at
+    t sqrt(g/H) = each of ``report_at``, H the column's height). From the frames, the fluid's
+    speeds over 2 sqrt(g H) (the dam break's front speed in shallow water): ``speed_999``, the
+    largest 99.9th percentile of a frame, and ``speed_max``, the largest speed; ``removed``,
+    the fluid removed outside the domain over the fluid at t = 0; ``end`` in t sqrt(g/H).
+    """
+    from parmps.result import open_result
+    scale = column_time_scale(case)
+    lower, upper = fluid_extent(case)
+    front_speed = 2.0 * math.sqrt(gravity(case) * (upper[1] - lower[1]))
+    with open_result(path) as result:
+        d = result.diagnostics
+        budget = d["fluid_energy"] - d["boundary_work"]
+        if "body_energy" in d:
+            budget = budget + d["body_energy"]
+        steps = d["step"]
+        p999, largest, frame_steps = [], [], []
+        for frame in result.frames:
+            speed = np.linalg.norm(frame.velocity[frame.kind == 0], axis=1)
+            p999.append(np.quantile(speed, 0.999) if len(speed) else 0.0)
+            largest.append(speed.max() if len(speed) else 0.0)
+            frame_steps.append(frame.step)
+        rows = np.searchsorted(steps, np.asarray(frame_steps[1:]))
+        rows = rows[rows < len(steps)]
+        at_frames = budget[rows]
+        initial = d["fluid_energy"][0]
+        time = d["time"] * scale
+        return {"energy_rise": float(np.diff(at_frames).max() / initial)
+                if len(at_frames) > 1 else 0.0,
+                "energy_end": float(d["fluid_energy"][-1] / initial),
+                "energy_at": {f"{t:g}": float(np.interp(t, time, d["fluid_energy"]) / initial)
+                              for t in report_at if t <= time[-1]},
+                "speed_999": float(max(p999) / front_speed),
+                "speed_max": float(max(largest) / front_speed),
+                "removed": float(d["n_escaped"][-1] / (d["n_fluid"][0] + d["n_escaped"][0])),
+                "end": float(time[-1])}
+
+
+# --------------------------------------------------------------------------
 # Dam break: the surge front against Martin & Moyce
 
 def front(frame, wall_x, spacing, floor=None, band=None):
