@@ -217,3 +217,16 @@ def test_a_membrane_stretched_past_its_chains_stops_the_run_naming_body_node_and
                  + PULL.format(within=1.0e-6, force=2.0e-9).replace("5.0e-4", "1.0e-4"))
     with pytest.raises(RunFailure, match=r"body 'cell'.*node \d+.*maximum_extension"):
         _run(case, 20)
+
+
+def test_the_icosahedral_cell_is_closed_and_the_octahedral_cells_shape():
+    from parmps.solids.mass_spring.shell import check_closed_surface, triangle_areas
+    from parmps.solids.mass_spring.surface import enclosed_volume
+    vertices, triangles = red_blood_cell(frequency=6, base="icosahedron")
+    check_closed_surface("icosahedral cell", vertices, triangles)
+    assert len(vertices) == 10 * 6 ** 2 + 2
+    fine = red_blood_cell(frequency=24)
+    assert triangle_areas(vertices, triangles).sum() == pytest.approx(
+        triangle_areas(*fine).sum(), rel=0.02)
+    assert enclosed_volume(vertices, triangles) == pytest.approx(enclosed_volume(*fine),
+                                                                 rel=0.03)
