@@ -193,6 +193,7 @@ def test_the_area_and_volume_of_a_small_pulled_shell_are_kept_within_1e_8():
     _, body, worst = _run(case, 20)
     assert np.ptp(body.position[:, 0]) > 4.05e-6       # it did stretch
     assert worst <= 1e-8
+    assert body.energy()[1] > 0.0                       # the membrane's, stretched
 
 
 def test_a_sphere_cannot_keep_both_its_area_and_its_volume():
@@ -230,3 +231,19 @@ def test_the_icosahedral_cell_is_closed_and_the_octahedral_cells_shape():
         triangle_areas(*fine).sum(), rel=0.02)
     assert enclosed_volume(vertices, triangles) == pytest.approx(enclosed_volume(*fine),
                                                                  rel=0.03)
+
+
+def test_a_membrane_folded_over_stops_the_run_naming_the_node_and_the_settings():
+    vertices, triangles = red_blood_cell(frequency=6, base="icosahedron")
+    m = _membrane(vertices, triangles)
+    m.check("cell", vertices)                      # at rest: nothing to say
+    folded = vertices.copy()
+    # The node nearest the top face's centre, slid past its neighbours: its triangles on
+    # that side turn over.
+    top = np.flatnonzero(vertices[:, 2] > 0)
+    node = int(top[np.argmin(np.hypot(vertices[top, 0], vertices[top, 1]))])
+    edge = np.linalg.norm(vertices[triangles[0, 0]] - vertices[triangles[0, 1]])
+    folded[node, 0] += 3.0 * edge
+    with pytest.raises(RunFailure, match=r"body 'cell': its membrane folded over at node "
+                                         r"\d+ .*bending_modulus.*solid.safety"):
+        m.check("cell", folded)

@@ -813,9 +813,11 @@ def cell_stretch(path, case, reference, body="cell", drift_window=5.0e-4):
         times = np.asarray(result.frames.times)
         wall, steps = result.diagnostics["wall_seconds"], result.diagnostics["time"]
         ends = np.append(starts[1:], times[-1])
-        samples = [(0.0, 0.0, 0, 0)] + [(force, end, int(np.searchsorted(times, end + 1e-12) - 1),
-                                         int(np.searchsorted(times, end - drift_window + 1e-12) - 1))
-                                        for force, end in zip(levels, ends)]
+        # (force, end of its hold, its last frame, the frame drift_window before).
+        samples = [(0.0, 0.0, 0, 0)] + [
+            (force, end, int(np.searchsorted(times, end + 1e-12) - 1),
+             int(np.searchsorted(times, end - drift_window + 1e-12) - 1))
+            for force, end in zip(levels, ends)]
         frames = {k: {key: np.array(result.frames[k].bodies[body][key])
                       for key in ("position", "velocity")} for s in samples for k in s[2:]}
     forces = []

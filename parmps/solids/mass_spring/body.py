@@ -343,6 +343,11 @@ class Body:
 
     def energy(self):
         """Kinetic and elastic energy (external work is not included)."""
+        if self.membrane is not None:
+            # Its springs are only the stand-in the substep is chosen from.
+            from parmps.solids.mass_spring.membrane import membrane_energy
+            return (kinetic_energy(self.velocity, self.mass),
+                    membrane_energy(self.position, self.membrane))
         return (kinetic_energy(self.velocity, self.mass),
                 spring_energy(self.position, self.springs, self.rest_length, self.stiffness))
 

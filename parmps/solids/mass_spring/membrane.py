@@ -284,8 +284,8 @@ class Membrane:
             held, body.load_field, body.load_start, body.load_end, body.load_ramp, time, h,
             count, self.edges, self.max_length, self.kp, self.kbt_over_p, self.exponent,
             self.damping, EXTENSION_LIMIT, self.quads, self.rest_cosine, self.rest_sine,
-            self.kb, self.rest_area, self.local_modulus, self.drag, self.triangles, self.rest, self.active, body.constraint_tolerance,
-            body.constraint_iterations)
+            self.kb, self.rest_area, self.local_modulus, self.drag, self.triangles, self.rest,
+            self.active, body.constraint_tolerance, body.constraint_iterations)
         body.multiplier = float(self.multiplier[1])
         return count
 
@@ -306,14 +306,15 @@ class Membrane:
         """Stop a membrane that tore or folded over, naming the body, a node and the
         setting to change."""
         self.check_extension(name)
-        angle = dihedral_angles(position, self.quads)
-        folded = np.abs(np.angle(np.exp(1j * (angle - self.rest_angle)))) > FOLD_LIMIT
-        if folded.any():
-            worst = int(np.flatnonzero(folded)[0])
+        # The turn from rest, wrapped to [0, pi].
+        turn = np.abs(np.angle(np.exp(1j * (dihedral_angles(position, self.quads)
+                                             - self.rest_angle))))
+        if turn.max() > FOLD_LIMIT:
+            worst = int(np.argmax(turn))
             raise RunFailure(
                 f"body '{name}': its membrane folded over at node {self.quads[worst, 0]} "
-                f"(two triangles turned {math.degrees(abs(angle[worst] - self.rest_angle[worst])):.0f}"
-                f" degrees from rest): raise bending_modulus, refine the shell, or shorten "
+                f"(two triangles turned {math.degrees(turn[worst]):.0f} degrees from "
+                f"rest): raise bending_modulus, refine the shell, or shorten "
                 f"the substep (solid.safety)")
 
 

@@ -71,9 +71,10 @@ def _corner(position, i, j):
 def bending_forces(position, quads, rest_cosine, rest_sine, kb, force):
     """Forces of U = kb sum (1 - cos(theta - theta0)) over the dihedrals ``quads`` (a, b,
     c, d) (membrane.dihedral_angles: the signed angle between the outward normals of
-    (a, b, c) and (b, a, d)), theta0 given by its cosine and sine, added into ``force``. The angle's gradient: c and d move it
-    by -|e| N/|N|^2 along their triangle's normal N, a and b by the opposite of those
-    shares weighted by where c and d project on the edge e = b - a."""
+    (a, b, c) and (b, a, d)), theta0 given by its cosine and sine, added into ``force``.
+    The angle's gradient: c and d move it by -|e| N/|N|^2 along their triangle's normal N,
+    a and b by the opposite of those shares weighted by where c and d project on the edge
+    e = b - a."""
     for q in range(quads.shape[0]):
         ia, ib, ic, id_ = quads[q, 0], quads[q, 1], quads[q, 2], quads[q, 3]
         ex, ey, ez = _corner(position, ib, ia)
