@@ -491,7 +491,7 @@ def test_a_mesh_file_body_is_read_and_moved(tmp_path):
      'radius = 0.5', 3, r'body\[0\].radius applies to shell bodies only'),
     ('type = "shell"\nshape = "red_blood_cell"\nradius = 0.5\nstiffness = 1.0\n'
      'node_mass = 1.0', 3, r'\.radius does not apply to shape = "red_blood_cell" \(it reads '
-     r'diameter, axis, spacing, refinement and center\)'),
+     r'diameter, axis, spacing, refinement, geodesic_base and center\)'),
     ('type = "shell"\nradius = 0.5\nspacing = 0.1\nrefinement = 3\nstiffness = 1.0\n'
      'node_mass = 1.0', 3, "give spacing .* or refinement, not both"),
     ('type = "shell"\nshape = "capsule"\nradius = 0.5\nlength = 1.0\nspacing = 1e-4\n'

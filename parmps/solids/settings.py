@@ -5,6 +5,7 @@ import math
 
 from parmps.config import ZERO, Key, Section
 from parmps.core.settings import has_fluid
+from parmps.solids.mass_spring.membrane import KEYS as MEMBRANE_KEYS
 from parmps.solids.mass_spring.shell import KEYS as SHELL_KEYS
 from parmps.solids.mass_spring.shell import check_shell_in_fluid
 
@@ -107,8 +108,14 @@ SECTIONS = {
             "start": Key("float", 0.0, ge=0.0, doc="[s]"),
             "end": Key("float", math.inf, gt=0.0, doc="[s]; default: never ends"),
             "ramp": Key("float", 0.0, ge=0.0, doc="linear rise and fall time [s]"),
+            "within": Key("float", 0.0, ge=0.0,
+                          doc="a contact patch: the nodes within this distance [m] of the "
+                              "centre of the set named (e.g. a shell's right side) instead"),
+            "total": Key("bool", False, doc="force is the set's total, spread evenly over "
+                                            "its nodes, not each node's"),
         }, doc="[[body.load]]: a force on a node set over a time window"),
         **SHELL_KEYS,
+        **MEMBRANE_KEYS,
     }, many=True, doc="a mass-spring solid: a lattice or general nodes and springs"),
 }
 

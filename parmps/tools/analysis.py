@@ -982,3 +982,77 @@ def record_origin_fits(record, results=(), gauges=("H4",), window=(0.0, 0.35),
                                                                       gravity(case))),
                  **fit})
     return rows
+
+# A cell stretched by optical tweezers (validation/rbc_stretch/)
+
+def _pull_levels(spec):
+    """(start times, total pull at each level [N]) of a body's loads along +x: each load
+    adds its total force from its start on (the staircase of validation/rbc_stretch/)."""
+    pulls = sorted((load for load in spec["load"] if load["force"][0] > 0),
+                   key=lambda load: load["start"])
+    if not pulls or not all(load["total"] for load in pulls):
+        raise ValueError("the body has no pull along +x given as a total (total = true)")
+    starts = np.array([load["start"] for load in pulls])
+    return starts, np.cumsum([load["force"][0] for load in pulls])
+
+
+def _diameters(position):
+    """(axial, transverse) extent of a cell: along x, and along y in the disc's plane."""
+    return float(np.ptp(position[:, 0])), float(np.ptp(position[:, 1]))
+
+
+def cell_stretch(path, case, reference, body="cell", drift_window=5.0e-4):
+    """The stretched cell's axial and transverse diameters at every pull, at the end of
+    its hold, against the experiment's range (``reference``: force_pN and the low/high
+    columns of each diameter), with how still the cell was there.
+
+    The pull is the body's loads along +x (:func:`_pull_levels`); each level is held until
+    the next one starts, or the run ends. At rest means: the fastest node's speed in the
+    hold's last frame, and the diameters' change over its last ``drift_window`` seconds.
+    Returns ``forces`` (per level, keyed by its force in pN, 0 first: force_pN, axial_um
+    and transverse_um, their ranges and verdicts, speed [m/s], drift [m], wall [s]), the
+    counts outside the ranges, the largest speed and drift [m], the largest area and
+    volume errors, and the loop's wall seconds in all.
+    """
+    (spec,) = [b for k, b in enumerate(case["body"]) if (b["name"] or f"body{k}") == body]
+    starts, levels = _pull_levels(spec)
+    table = reference_table(reference)
+    series = solid_series(path, body)
+    with open_result(path) as result:
+        times = np.asarray(result.frames.times)
+        wall, steps = result.diagnostics["wall_seconds"], result.diagnostics["time"]
+        ends = np.append(starts[1:], times[-1])
+        # (force, end of its hold, its last frame, the frame drift_window before).
+        samples = [(0.0, 0.0, 0, 0)] + [
+            (force, end, int(np.searchsorted(times, end + 1e-12) - 1),
+             int(np.searchsorted(times, end - drift_window + 1e-12) - 1))
+            for force, end in zip(levels, ends)]
+        frames = {k: {key: np.array(result.frames[k].bodies[body][key])
+                      for key in ("position", "velocity")} for s in samples for k in s[2:]}
+    forces = []
+    for level, (force, end, last, before) in enumerate(samples):
+        row = int(np.argmin(np.abs(table["force_pN"] - force * 1e12)))
+        if abs(table["force_pN"][row] - force * 1e12) > 0.5:
+            raise ValueError(f"no reference row for {force * 1e12:.1f} pN")
+        axial, transverse = _diameters(frames[last]["position"])
+        drift = np.subtract(_diameters(frames[last]["position"]),
+                            _diameters(frames[before]["position"]))
+        start = starts[level - 1] if level else 0.0
+        spent = (float(np.interp(end, steps, wall) - np.interp(start, steps, wall))
+                 if level else 0.0)
+        entry = {"force_pN": float(table["force_pN"][row]), "axial_um": axial * 1e6,
+                 "transverse_um": transverse * 1e6,
+                 "speed": float(np.linalg.norm(frames[last]["velocity"], axis=1).max()),
+                 "drift": float(np.abs(drift).max()), "wall": spent}
+        for name in ("axial", "transverse"):
+            low, high = (float(table[f"{name}_{end}_um"][row]) for end in ("low", "high"))
+            entry.update({f"{name}_low_um": low, f"{name}_high_um": high,
+                          f"{name}_in_range": low <= entry[f"{name}_um"] <= high})
+        forces.append(entry)
+    return {"forces": {f"{f['force_pN']:g}": f for f in forces},
+            "axial_outside": sum(not f["axial_in_range"] for f in forces),
+            "transverse_outside": sum(not f["transverse_in_range"] for f in forces),
+            "speed": max(f["speed"] for f in forces), "drift": max(f["drift"] for f in forces),
+            "area_error": float(np.abs(series["area_error"]).max()),
+            "volume_error": float(np.abs(series["volume_error"]).max()),
+            "wall": float(wall[-1])}

@@ -290,6 +290,9 @@ class Body:
         # statement the compiled body_substeps is tested against.
         self.compiled = True
         self._determinant_terms = determinant_terms(d)
+        # A cell membrane's forces and constraints (membrane.attach), instead of the
+        # springs' and the volume constraint's; the springs then only set the substep.
+        self.membrane = None
 
     def _set_surface(self, facets):
         """The boundary facets, and the same facets over the boundary nodes alone: the
@@ -340,6 +343,11 @@ class Body:
 
     def energy(self):
         """Kinetic and elastic energy (external work is not included)."""
+        if self.membrane is not None:
+            # Its springs are only the stand-in the substep is chosen from.
+            from parmps.solids.mass_spring.membrane import membrane_energy
+            return (kinetic_energy(self.velocity, self.mass),
+                    membrane_energy(self.position, self.membrane))
         return (kinetic_energy(self.velocity, self.mass),
                 spring_energy(self.position, self.springs, self.rest_length, self.stiffness))
 
@@ -357,6 +365,8 @@ class Body:
         damping rate keeps its node bound.
         """
         _, rate = stiffest_frequency(self.mass, self.springs, self.stiffness, self.damping)
+        if self.membrane is not None:
+            rate += self.membrane.drag
         omega = highest_frequency(stiffness_matrix(self.position, self.springs, self.stiffness),
                                   self.mass)
         return verlet_limit(omega, rate)
@@ -390,6 +400,8 @@ class Body:
         """Run n = ceil(dt_outer/dt_sub) Verlet substeps from ``time``; return n."""
         n_sub = substep_count(dt_outer, dt_sub)
         h = dt_outer / n_sub
+        if self.membrane is not None:
+            return self.membrane.advance(self, time, h, n_sub)
         if self.acceleration is None:
             # The first substep drifts by h v + h^2/2 a from the initial velocity.
             self.acceleration = self.acceleration_at(time, self.velocity, h, kick=0.5)

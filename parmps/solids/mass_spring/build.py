@@ -31,6 +31,8 @@ from parmps.core.geometry import outside_box
 from parmps.errors import CaseError
 from parmps.solids.mass_spring.body import Body, polygon_area
 from parmps.solids.mass_spring.elastic import check_not_elastic, elastic_lattice, is_elastic
+from parmps.solids.mass_spring.membrane import attach as attach_membrane
+from parmps.solids.mass_spring.membrane import check_keys as check_membrane_keys
 from parmps.solids.mass_spring.lattice import FACE_DIAGONAL, lattice_geometry  # noqa: F401
 from parmps.solids.mass_spring.shell import check_keys as check_shell_keys, shell_body
 
@@ -357,8 +359,15 @@ def _loads(label, spec, position, shape):
             raise CaseError(f"{where}.ramp ({load['ramp']}) must be at most half the window "
                             f"end - start ({load['end'] - load['start']:g})")
         nodes = node_set(where, load["nodes"], position, load["index"], load["ids"], shape)
-        loads.append((nodes, np.asarray(load["force"]), load["start"], load["end"],
-                      load["ramp"]))
+        if load["within"] > 0:
+            # A contact patch: every node within the distance of the set's centre.
+            centre = position[nodes].mean(axis=0)
+            nodes = np.flatnonzero(np.linalg.norm(position - centre, axis=1)
+                                   <= load["within"])
+        force = np.asarray(load["force"], dtype=float)
+        if load["total"]:
+            force = force / len(nodes)
+        loads.append((nodes, force, load["start"], load["end"], load["ramp"]))
     return loads
 
 
@@ -371,7 +380,11 @@ def build_body(k, spec, gravity, domain=None):
     builder = {"lattice": _lattice, "general": _general, "shell": shell_body}[spec["type"]]
     if spec["type"] != "shell":
         check_shell_keys(label, spec)
-    position, springs, stiffness, mass, boundary, shape = builder(label, spec, dimension)
+    check_membrane_keys(label, spec)
+    wlc = spec.get("membrane") == "wlc"
+    # A membrane replaces the shell's springs (membrane.attach): build it with placeholders.
+    shell_spec = dict(spec, stiffness=1.0, bending_stiffness=0.0) if wlc else spec
+    position, springs, stiffness, mass, boundary, shape = builder(label, shell_spec, dimension)
     damping, axial_damping = spec["damping"], False
     if shape is not None and is_elastic(spec):
         stiffness, mass, damping, axial_damping, _ = elastic_lattice(label, spec, shape, springs)
@@ -395,6 +408,8 @@ def build_body(k, spec, gravity, domain=None):
                 encloses_fluid=spec["type"] == "shell")
     if body.rest_volume <= 0.0:
         raise CaseError(f"{label}: its boundary encloses no volume ({body.rest_volume:.6g})")
+    if wlc:
+        attach_membrane(body, label, spec)
     log.debug("body %s: %d nodes, %d springs, volume %.6g, %d pinned, %d loads", name, n,
               len(springs), body.rest_volume, int(pinned.sum()), len(loads))
     return body

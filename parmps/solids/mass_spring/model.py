@@ -55,6 +55,8 @@ class MassSpringModel(SolidModel):
         # Per body and step: name -> trailing shape.
         self.SERIES = {"volume_error": (), "fluid_force": (d,), "centroid": (d,),
                        "newton_steps": ()}
+        if any(body.membrane is not None for body in self.bodies):
+            self.SERIES["area_error"] = ()
         self.safety = float(safety)
         self.fixed_substep = float(substep)
         # The limits are eigen solves: computed once, for the substeps and the summary.
@@ -113,6 +115,11 @@ class MassSpringModel(SolidModel):
             body.fluid_force[:] = 0.0 if force is None else force
             self.last_substep_counts[body.name] = body.advance(time, dt_outer,
                                                                self.substeps[body.name])
+            if body.membrane is not None:
+                try:
+                    body.membrane.check_extension(body.name)
+                except RunFailure as exc:
+                    raise RunFailure(f"t = {time + dt_outer:.6g} s: {exc}") from None
             if not np.all(np.isfinite(body.position)):
                 raise RunFailure(f"body '{body.name}' became non-finite at t = "
                                  f"{time + dt_outer:.6g} s")
@@ -121,11 +128,17 @@ class MassSpringModel(SolidModel):
     def diagnostics(self):
         """Per body: volume_error, centroid (d,), fluid_force (d,) and newton_steps (the
         most Newton steps on the volume multiplier any substep of the last step took)."""
-        return {body.name: {"volume_error": body.volume_error(),
-                            "centroid": body.centroid(),
-                            "fluid_force": body.total_fluid_force(),
-                            "newton_steps": body.newton_steps}
-                for body in self.bodies}
+        out = {body.name: {"volume_error": body.volume_error(),
+                           "centroid": body.centroid(),
+                           "fluid_force": body.total_fluid_force(),
+                           "newton_steps": body.newton_steps}
+               for body in self.bodies}
+        if "area_error" in self.SERIES:
+            # The total area of a cell membrane (0 for the other bodies).
+            for body in self.bodies:
+                out[body.name]["area_error"] = (body.membrane.area_error(body.position)
+                                                if body.membrane is not None else 0.0)
+        return out
 
     def stable_substeps(self):
         return dict(self.substeps)
@@ -224,6 +237,11 @@ def check_bodies(bodies, step, time):
     """Stop if a body blew up. Bodies are replicated (or broadcast) on every rank,
     so every rank reaches the same verdict without communication."""
     for body in bodies:
+        if body.membrane is not None and np.all(np.isfinite(body.position)):
+            try:
+                body.membrane.check(body.name, body.position)
+            except RunFailure as exc:
+                raise RunFailure(f"step {step}, t = {time:.6g} s: {exc}") from None
         finite, error, stretch = body_state(body)
         speed = float(np.sqrt((body.velocity ** 2).sum(axis=1)).max()) if finite else np.inf
         if not finite:

@@ -208,18 +208,25 @@ def rbc_half_thickness(r, diameter=RBC_DIAMETER, coefficients=RBC_COEFFICIENTS):
 
 
 def red_blood_cell(diameter=RBC_DIAMETER, edge_length=None, frequency=None,
-                   center=(0.0, 0.0, 0.0), coefficients=RBC_COEFFICIENTS):
+                   center=(0.0, 0.0, 0.0), coefficients=RBC_COEFFICIENTS, base="octahedron"):
     """The biconcave disc of Evans & Fung (1972), axis z, scaled to ``diameter``.
 
     An octahedral geodesic unit sphere mapped (x, y, z) -> (R x, R y, z g(x^2 + y^2))
     with R = D/2 and g = D (c0 + c1 rho^2/4 + c2 rho^4/16): since |z| = sqrt(1 - rho^2)
     on the sphere, every vertex lands on the profile. g > 0, so the map keeps the
-    triangles' orientation; the rim is the sphere's exact equator ring.
+    triangles' orientation; the rim is the sphere's exact equator ring. ``base =
+    "icosahedron"`` maps an icosahedral sphere instead (10 n^2 + 2 vertices): no ring
+    on the rim, but no grid lines along x and y either.
     """
     if not diameter > 0:
         raise CaseError(f"red_blood_cell: diameter must be > 0, got {diameter}")
-    n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell", 8)
-    unit, triangles = geodesic(*_octahedron(), n)
+    if base == "icosahedron":
+        n = _frequency(diameter / 2.0 * math.acos(1.0 / math.sqrt(5.0)), edge_length,
+                       frequency, "red_blood_cell", 20)
+        unit, triangles = geodesic(*_icosahedron(), n)
+    else:
+        n = _frequency(math.pi * diameter / 4.0, edge_length, frequency, "red_blood_cell", 8)
+        unit, triangles = geodesic(*_octahedron(), n)
     rho2 = unit[:, 0] ** 2 + unit[:, 1] ** 2
     c0, c1, c2 = coefficients
     g = diameter * (c0 + c1 * rho2 / 4.0 + c2 * rho2 ** 2 / 16.0)
@@ -722,6 +729,10 @@ KEYS = {
     "mesh": Key("str", "", doc="shell with shape = \"file\": a closed surface mesh (STL, OBJ, "
                                "Gmsh .msh, VTK, ... read by meshio; a relative path is from "
                                "the working directory)"),
+    "geodesic_base": Key("str", "octahedron", choices=("octahedron", "icosahedron"),
+                         doc="shell red_blood_cell: the geodesic sphere mapped onto the cell "
+                             "(the octahedron's grid runs along x and y; the icosahedron's "
+                             "does not)"),
     "refinement": Key("int", 0, ge=0,
                       doc="shell: geodesic frequency n (each base edge cut n times; 2^k is k "
                           "midpoint subdivisions) instead of spacing"),
@@ -764,10 +775,10 @@ def _oriented(mesh, axis, center):
 # The keys each shape reads, beside center; the others must keep their defaults.
 SHAPE_KEYS = {"sphere": ("radius", "spacing", "refinement"),
               "capsule": ("radius", "length", "axis", "spacing", "refinement"),
-              "red_blood_cell": ("diameter", "axis", "spacing", "refinement"),
+              "red_blood_cell": ("diameter", "axis", "spacing", "refinement", "geodesic_base"),
               "file": ("mesh",)}
 UNSET = {"radius": 0.0, "length": 0.0, "diameter": 0.0, "axis": "z", "mesh": "",
-         "spacing": 0.0, "refinement": 0}
+         "spacing": 0.0, "refinement": 0, "geodesic_base": "octahedron"}
 
 
 def _check_shape_keys(label, spec):
@@ -802,7 +813,8 @@ def shell_mesh(label, spec):
             elif shape == "capsule":
                 made = capsule(spec["radius"], spec["length"], h, frequency)
             else:
-                made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency)
+                made = red_blood_cell(spec["diameter"] or RBC_DIAMETER, h, frequency,
+                                      base=spec.get("geodesic_base", "octahedron"))
         except CaseError as exc:  # the generators name themselves, not the body
             raise CaseError(f"{label}: {exc}") from None
         mesh = _oriented(made, spec["axis"], spec["center"])
