@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, open_result, schema, validation
-from parmps.core import scene
+from parmps.geometry import scene
 from parmps.core.particles import FLUID, WALL
 from parmps.errors import CaseError
 from parmps.probes.sampling import (SampleRows, column_end, kernel_sums, lattice_sum,

@@ -75,7 +75,7 @@ class Simulation:
         log.info("continuing from the checkpoint at step %d, t = %.6g s (written on %d "
                  "rank(s))", self.state.step, self.state.time, self.checkpoint.ranks)
     def _set_up_fluid(self):
-        from parmps.core import scene
+        from parmps.geometry import scene
         from parmps.fluid.projection import FluidSolver
         from parmps.parallel import create_decomposition
         case, comm = self.case, self.comm
