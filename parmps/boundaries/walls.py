@@ -35,7 +35,8 @@ from parmps.core.geometry import format_point
 from parmps.errors import CaseError
 from parmps.fluid.participant import Participant
 
-SECTIONS = ("tank", "wall_box")
+# The walls that may move: tanks, wall boxes and walls of any shape (parmps.geometry).
+SECTIONS = ("tank", "wall_box", "wall")
 
 
 def travel(spec, time):

@@ -201,9 +201,10 @@ def _check_edges(source, vertices, triangles):
                         f"triangle outward")
 
 
-def check_closed_surface(source, vertices, triangles):
+def check_closed_surface(source, vertices, triangles, single=True):
     """Refuse, in one line starting with ``source``, a mesh that is not a closed,
-    manifold, consistently and outward oriented surface. Returns its volume."""
+    manifold, consistently and outward oriented surface (``single``: and one connected
+    surface, as a shell body is; a wall may be several). Returns its volume."""
     vertices = np.asarray(vertices, dtype=float)
     triangles = np.asarray(triangles, dtype=np.int64)
     if vertices.ndim != 2 or vertices.shape[1] != 3 or triangles.ndim != 2 \
@@ -219,7 +220,7 @@ def check_closed_surface(source, vertices, triangles):
         raise CaseError(f"{source}: {int(pinched.sum())} non-manifold vertices (where separate "
                         f"parts of the surface touch), e.g. vertex {v} at {_at(vertices, v)}")
     parts = np.unique(surface_parts(triangles, len(vertices)))
-    if len(parts) > 1:
+    if single and len(parts) > 1:
         # One multiplier for several surfaces would let volume pass between them.
         raise CaseError(f"{source}: the mesh is {len(parts)} separate closed surfaces (those "
                         f"of vertices {', '.join(map(str, parts[:3]))}"
@@ -385,7 +386,22 @@ def _column_pairs(vertices, triangles, origin, spacing, low, shape):
 
 def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
     """The points of the lattice ``origin + spacing (i, j, k)`` inside the closed
-    outward surface; shape (k, 3). Points on the surface itself fall either side.
+    outward surface; shape (k, 3). Points on the surface itself fall either side
+    (:func:`lattice_winding`)."""
+    origin = np.asarray(origin, dtype=float)
+    low = np.ceil((vertices.min(axis=0) - origin) / spacing).astype(np.int64)
+    high = np.floor((vertices.max(axis=0) - origin) / spacing).astype(np.int64)
+    shape = tuple(int(n) for n in np.maximum(high - low + 1, 0))
+    if min(shape) == 0:
+        return np.empty((0, 3))
+    winding = lattice_winding(vertices, triangles, spacing, origin, low, shape)
+    inside = np.argwhere(winding > 0.5)
+    return origin + spacing * (inside + low)
+
+
+def lattice_winding(vertices, triangles, spacing, origin, low, shape):
+    """The winding number (shape ``shape``) of the closed outward surface at the lattice
+    points ``origin + spacing (low + (i, j, k))``: 1 inside, 0 outside.
 
     A vertical ray up each lattice column crosses triangles; each crossing adds
     the sign of the triangle's normal z to the winding number of every lattice
@@ -395,11 +411,7 @@ def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
     triangle plus the lattice points.
     """
     origin = np.asarray(origin, dtype=float)
-    low = np.ceil((vertices.min(axis=0) - origin) / spacing).astype(np.int64)
-    high = np.floor((vertices.max(axis=0) - origin) / spacing).astype(np.int64)
-    shape = tuple(int(n) for n in np.maximum(high - low + 1, 0))
-    if min(shape) == 0:
-        return np.empty((0, 3))
+    low = np.asarray(low, dtype=np.int64)
     triangle, i, j = _column_pairs(vertices, triangles, origin, spacing, low, shape)
     column = origin[:2] + spacing * np.column_stack([i + low[0], j + low[1]])
     hit, z, sign = _crossings(column, triangle, vertices, triangles)
@@ -410,9 +422,7 @@ def fill_inside(vertices, triangles, spacing, origin=(0.0, 0.0, 0.0)):
                         minlength=shape[0] * shape[1] * (shape[2] + 1))
     jumps = jumps.reshape(shape[0], shape[1], shape[2] + 1)
     # Winding number of level k: the crossings with below > k.
-    winding = np.cumsum(jumps[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
-    inside = np.argwhere(winding > 0.5)
-    return origin + spacing * (inside + low)
+    return np.cumsum(jumps[:, :, ::-1], axis=2)[:, :, ::-1][:, :, 1:]
 
 
 def points_inside(points, vertices, triangles):

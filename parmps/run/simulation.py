@@ -154,11 +154,13 @@ class Simulation:
             found.append(observing.BodySeries(result, self.model, self.coupling, interval,
                                               self.end_time))
         if case["probe"]:
+            from parmps.geometry.walls import probed_walls
             from parmps.probes.observer import Probes
             found.append(Probes(result, case["probe"], case["particles"]["spacing"],
                                 self.model, interval, self.end_time, case["body"],
                                 case["dimension"],
-                                [(box["lower"], box["upper"]) for box in case["wall_box"]]))
+                                [(box["lower"], box["upper"]) for box in case["wall_box"]],
+                                probed_walls(case)))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)
