@@ -417,3 +417,39 @@ def test_a_force_probe_on_a_submerged_circle_reads_its_buoyancy(tmp_path):
     expected = 1000.0 * 9.81 * math.pi * r * (r + 0.5 * L0)
     assert abs(force[-1, 2] / expected - 1) < 0.08, (force[-1], expected)
     assert abs(force[-1, 1]) < 1e-3 * expected
+
+
+# --------------------------------------------------------------------------
+# The run-time guard on a wall of any shape
+
+
+@pytest.mark.parametrize("given", ["mesh", "shape"])
+def test_the_guard_stops_fluid_deep_in_a_walls_material(given):
+    from mpi4py import MPI
+
+    from parmps.core.particles import Particles
+    from parmps.errors import RunFailure
+    from parmps.geometry.walls import MaterialDepth
+    from parmps.run import guards
+
+    surface = (f'mesh = "{MESHES / "cylinder.stl"}"' if given == "mesh" else
+               'shape = "cylinder"\ncenter = [0.1, 0.1, 0.1]\nradius = 0.05\nlength = 0.1')
+    text = DOMAIN_3D.replace("upper = [0.25, 0.15, 0.15]", "upper = [0.25, 0.25, 0.2]") \
+        + f'[[wall]]\nname = "post"\n{surface}\nfluid = "outside"\n'
+    case = schema.validate(config.load_text(text))
+    walls = MaterialDepth(case)
+    # On the axis's level, at 0.2 l0 and 0.8 l0 inside the side, and outside it.
+    radius = np.array([0.05 - 0.002, 0.05 - 0.008, 0.06])
+    position = np.column_stack([0.1 + radius, np.full(3, 0.1), np.full(3, 0.1)])
+    depth, which = walls.depth(position, [np.zeros(3)])
+    # A mesh's depth is interpolated between lattice points: within 0.05 l0 of the
+    # cylinder's on a radius of 5 l0 (a shape's is exact).
+    np.testing.assert_allclose(depth, [0.002, 0.008, -0.01],
+                               atol=0.05 * L0 if given == "mesh" else 1e-12)
+    particles = Particles({"id": np.arange(3), "kind": np.full(3, FLUID),
+                           "position": position})
+    with pytest.raises(RunFailure, match="fluid particle 1 went through a wall: it is inside "
+                                         "wall\\[0\\] 'post'"):
+        guards.check_shaped_walls(particles, walls, case, 0.0, L0, MPI.COMM_SELF, 7)
+    particles.position[1] = particles.position[2]
+    guards.check_shaped_walls(particles, walls, case, 0.0, L0, MPI.COMM_SELF, 7)

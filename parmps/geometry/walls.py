@@ -229,3 +229,71 @@ def probed_walls(case):
             into = outward if spec["fluid"] == "outside" else -outward
             out[spec["name"]] = (points, weights, into)
     return out
+
+
+class MaterialDepth:
+    """How deep points lie in the material of each ``[[wall]]`` of a case (the run-time
+    guard's test for walls of any shape; a tank's and a wall box's are boxes).
+
+    A primitive answers exactly; a mesh by interpolating, multilinearly, its signed distance
+    on the lattice block about it (computed once, within ``reach`` of the surface: deeper
+    points read ``reach``)."""
+
+    def __init__(self, case):
+        spacing = case["particles"]["spacing"]
+        domain = (case["domain"]["lower"], case["domain"]["upper"])
+        self.walls = []
+        for k, spec in enumerate(case.get("wall", ())):
+            label = f"wall[{k}] '{spec['name']}'" if spec["name"] else f"wall[{k}]"
+            surface = surface_of(label, spec, domain)
+            reach = (spec["wall_layers"] + spec["dummy_layers"] + 2) * spacing
+            grid = None
+            if not hasattr(surface, "signed_distance"):
+                low, high = surface.bounds()
+                lattice = LatticeBlock.covering(case["particles"]["origin"], spacing,
+                                                np.asarray(low) - reach,
+                                                np.asarray(high) + reach)
+                grid = (lattice, np.clip(surface.lattice_distance(lattice, reach),
+                                         -reach, reach))
+            self.walls.append((label, spec, surface, grid, reach))
+
+    def __bool__(self):
+        return bool(self.walls)
+
+    def depth(self, points, shifts):
+        """(depth into the deepest wall's material [m], that wall's index) of each point;
+        ``shifts``: each wall's displacement from where it was built."""
+        deepest = np.full(len(points), -np.inf)
+        which = np.full(len(points), -1, np.int64)
+        for k, (_, spec, surface, grid, reach) in enumerate(self.walls):
+            at = points - np.asarray(shifts[k], dtype=float)
+            signed = (surface.signed_distance(at) if grid is None
+                      else _interpolate(*grid, at, reach))
+            into = -signed if spec["fluid"] == "outside" else signed
+            deeper = into > deepest
+            deepest[deeper], which[deeper] = into[deeper], k
+        return deepest, which
+
+    def label(self, k):
+        return self.walls[k][0]
+
+
+def _interpolate(lattice, values, points, reach):
+    """Multilinear interpolation of ``values`` (on the block's points) at ``points``;
+    points off the block read +reach (outside the surface, beyond its band)."""
+    index = (points - lattice.corner) / lattice.spacing
+    shape = np.array(lattice.shape)
+    first = np.floor(index).astype(np.int64)
+    inside = np.all((first >= 0) & (first < shape - 1), axis=1)
+    out = np.full(len(points), reach)
+    if not inside.any():
+        return out
+    first, fraction = first[inside], index[inside] - first[inside]
+    total = np.zeros(len(first))
+    d = len(shape)
+    for corner in range(2 ** d):
+        bits = np.array([(corner >> a) & 1 for a in range(d)])
+        weight = np.prod(np.where(bits, fraction, 1.0 - fraction), axis=1)
+        total += weight * values[tuple((first + bits).T)]
+    out[inside] = total
+    return out
