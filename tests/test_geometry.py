@@ -349,16 +349,38 @@ velocity = [-0.1, 0.0]
 [[outlet]]
 side = "left"
 velocity = [-0.1, 0.0]
+[[check]]
+kind = "wall_crossing"
+wall = "cylinder"
 """
 
 
 @pytest.mark.mpi
 def test_a_channel_with_a_circular_cylinder_runs_on_two_ranks(tmp_path):
+    from parmps import open_result
+
     case = tmp_path / "channel.toml"
     case.write_text(CHANNEL)
     result = run_parmps([case, "-o", tmp_path / "out"], ranks=2, timeout=240)
     assert result.returncode == 0, result.stderr
     assert "done: 5 steps" in result.stderr
+    with open_result(tmp_path / "out") as run:
+        check = run.checks["wall_crossing_cylinder"]
+        assert len(check.time) == len(run.diagnostics.time) == 5
+        assert check.total[-1] == 0
+
+
+@pytest.mark.parametrize("extra, message", [
+    ('kind = "wall_crossing"\nwall = "pillar"', "check[0].wall 'pillar' is not the name of a "
+                                                "[[wall]] of the case (cylinder)"),
+    ('kind = "wall_crossing"', "missing key 'check[0].wall'"),
+    ('kind = "wall_crossing"\nwall = "cylinder"\nbody = "gate"', "check[0].body is not a key"),
+])
+def test_a_bad_wall_crossing_check_is_one_line(extra, message):
+    text = CHANNEL.split("[[check]]")[0] + "[[check]]\n" + extra + "\n"
+    with pytest.raises(CaseError) as caught:
+        schema.validate(config.load_text(text))
+    assert message in str(caught.value) and "\n" not in str(caught.value)
 
 
 # --------------------------------------------------------------------------
@@ -453,3 +475,31 @@ def test_the_guard_stops_fluid_deep_in_a_walls_material(given):
         guards.check_shaped_walls(particles, walls, case, 0.0, L0, MPI.COMM_SELF, 7)
     particles.position[1] = particles.position[2]
     guards.check_shaped_walls(particles, walls, case, 0.0, L0, MPI.COMM_SELF, 7)
+
+
+def test_the_wall_crossing_check_counts_particles_going_into_the_material(tmp_path):
+    import types
+
+    import h5py
+    from mpi4py import MPI
+
+    from parmps.checks.walls import WallCrossing
+    from parmps.core.particles import Particles
+
+    case = schema.validate(config.load_text(CHANNEL))
+    position = np.array([[0.2, 0.1], [0.15, 0.145], [0.3, 0.1]])
+    particles = Particles({"id": np.array([5, 6, 7]), "kind": np.full(3, FLUID),
+                           "position": position})
+    with h5py.File(tmp_path / "r.h5", "w") as file:
+        result = types.SimpleNamespace(file=file, comm=MPI.COMM_SELF)
+        check = WallCrossing(case["check"][0], case, result, None, 0.01, 1.0)
+        state = types.SimpleNamespace(particles=particles, time=0.0, step=0)
+        check.start(state)
+        # Particle 6 goes 0.2 l0 into the cylinder (radius 0.04 about (0.15, 0.1)), 7 stays.
+        particles.position[1] = [0.15, 0.138]
+        for step in (1, 2):  # in the material for two steps: counted once
+            state.step, state.time = step, 0.002 * step
+            check.observe(state)
+        check.finish(state)
+        assert file["checks/wall_crossing_cylinder/crossings"][:].tolist() == [1, 0]
+        assert check.total == 1

@@ -68,7 +68,7 @@ class Probe:
             count = int(math.floor((top[-1] - bottom[-1]) / step + 1e-9)) + 1
             self.rows = [(bottom, np.eye(dimension)[-1], step, count, None, 1.0, 1)]
             self.heights = bottom[-1] + step * np.arange(count)
-        elif self.kind == "force" and spec["wall"]:
+        elif self.kind == "force" and spec.get("wall"):
             self._add_samples(*walls[spec["wall"]], spacing)
         elif self.kind == "force" and not spec["body"]:
             for lower, upper, outward in self._faces(spec, boxes):
@@ -138,7 +138,7 @@ class Probe:
             out["body"] = self.spec["body"]
         if self.kind == "force" and not self.spec["body"] and self.spec["wall_box"] >= 0:
             out["wall_box"] = self.spec["wall_box"]
-        if self.kind == "force" and self.spec["wall"]:
+        if self.kind == "force" and self.spec.get("wall"):
             out["wall"] = self.spec["wall"]
         if self.rows:
             out["radius"] = self.radius
