@@ -503,3 +503,15 @@ def test_the_wall_crossing_check_counts_particles_going_into_the_material(tmp_pa
         check.finish(state)
         assert file["checks/wall_crossing_cylinder/crossings"][:].tolist() == [1, 0]
         assert check.total == 1
+
+
+def test_a_clipped_fill_may_come_from_a_surface_larger_than_the_domain(tmp_path):
+    vertices, triangles = mesh.read_mesh(MESHES / "box.stl")
+    large = tmp_path / "large.stl"
+    meshio.write(large, meshio.Mesh(2 * vertices, [("triangle", triangles)]), binary=False)
+    no_block = DOMAIN_3D.split("[[fluid_block]]")[0]
+    _, clipped, _, _ = build(no_block + f'[[fluid_block]]\nmesh = "{large}"\n'
+                             'lower = [0.0, 0.0, 0.0]\nupper = [0.2, 0.1, 0.05]\n')
+    assert len(clipped.position) == 1000
+    with pytest.raises(CaseError, match="the mesh lies outside the domain"):
+        build(no_block + f'[[fluid_block]]\nmesh = "{large}"\n')

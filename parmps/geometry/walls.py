@@ -111,7 +111,8 @@ def _mesh_surface(label, spec, dimension, domain):
                         f"directory)")
     vertices, triangles = read_mesh(spec["mesh"], source)
     check_closed_surface(source, vertices, triangles, single=False)
-    check_inside_domain(source, vertices, domain)
+    if spec.get("lower") is None:  # a clipped fill may come from a larger surface
+        check_inside_domain(source, vertices, domain)
     log.debug("%s: %d vertices, %d triangles", source, len(vertices), len(triangles))
     return MeshSurface(vertices, triangles)
 
