@@ -125,13 +125,16 @@ def prepare_case(args):
     raw = config.load_text(text, args.case)
     for assignment in args.set or []:
         config.apply_override(raw, assignment)
+    from parmps.geometry.settings import resolve_paths
+    # The stored case must find its meshes from the output directory too.
+    moved = resolve_paths(raw, args.case)
     limits = _override_limits(raw, args)
     try:
         case = schema.validate(raw)
     except CaseError as exc:
         raise CaseError(f"{args.case}: {exc}") from None
     check_memory(case, args.case)
-    changed = bool(args.set) or limits
+    changed = bool(args.set) or limits or moved
     return case, toml.dumps(raw) if changed else text
 
 

@@ -13,6 +13,7 @@ from parmps.checks import settings as checks
 from parmps.core import settings as core
 from parmps.coupling import settings as coupling
 from parmps.fluid import settings as fluid
+from parmps.geometry import settings as geometry
 from parmps.io import settings as io
 from parmps.parallel import settings as parallel
 from parmps.probes import settings as probes
@@ -20,7 +21,7 @@ from parmps.run import settings as run
 from parmps.solids import settings as solids
 
 # Checks run in this order, each after every section is validated.
-COMPONENTS = (core, fluid, run, boundaries, solids, coupling, parallel, io, probes,
+COMPONENTS = (core, geometry, fluid, run, boundaries, solids, coupling, parallel, io, probes,
               checks)
 
 SECTIONS = {name: section for component in COMPONENTS

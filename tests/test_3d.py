@@ -15,7 +15,8 @@ from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, open_result, schema
-from parmps.core import lattice, scene
+from parmps.core import lattice
+from parmps.geometry import scene
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.errors import CaseError
 from parmps.probes.observer import Probe

@@ -116,7 +116,7 @@ def test_the_solid_cost_scenes_differ_only_by_the_body(monkeypatch):
     """--solid-cost's pair: the body's nodes sit exactly where the water variant's seventh
     block is, on the fluid's lattice, and nowhere else do the two scenes differ (the
     timed comparison is of the body's cost alone)."""
-    from parmps.core import scene
+    from parmps.geometry import scene
     from parmps.core.particles import FLUID
     from parmps.solids.mass_spring.model import MassSpringModel
     from parmps.validation import bench

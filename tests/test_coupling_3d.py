@@ -19,11 +19,11 @@ from parmps.core.geometry import (closed_surface_sides, inside_boundary, point_i
 from parmps.core.particles import FLUID, SOLID, WALL, Particles
 from parmps.coupling.weak import fluid_inside
 from parmps.errors import CaseError
+from parmps.geometry.mesh import enclosed_volume
+from parmps.geometry.shapes import icosphere
 from parmps.io.frames import read_frame
 from parmps.solids.mass_spring.lattice import lattice_geometry
 from parmps.solids.mass_spring.model import MassSpringModel
-from parmps.solids.mass_spring.shell import icosphere
-from parmps.solids.mass_spring.surface import enclosed_volume
 import tomllib
 
 # -- the inside test ------------------------------------------------------------------------
@@ -235,7 +235,7 @@ def test_the_fast_winding_number_classifies_as_the_exact_sum(surface):
     # The coupling counts the fluid inside a body with the patches' far field; off the
     # surface it is within 0.05 of the exact sum everywhere, so "inside" is the same.
     from parmps.core.geometry import fast_winding_number, winding_number
-    from parmps.solids.mass_spring.shell import red_blood_cell
+    from parmps.geometry.shapes import red_blood_cell
     if surface == "bent gate":
         body = lattice_geometry((3, 40, 36), 0.0025, (0.1, 0.0, 0.0))
         vertices, triangles = body.position.copy(), body.boundary
@@ -488,7 +488,7 @@ def test_a_shell_takes_the_place_of_the_water_at_its_surface_and_holds_the_rest(
     """The capsule case's scene: the fluid block fills the duct and the capsule; the points
     within half a spacing of the shell (its clearance, docs/shells.md) are left out, within
     four of as many as it has nodes, and the rest stay on both sides of it."""
-    from parmps.core import scene
+    from parmps.geometry import scene
     from parmps.solids.mass_spring.shell import fluid_clearance
     case = schema.validate(tomllib.loads(CAPSULE_3D.read_text()))
     model = MassSpringModel.from_case(case)

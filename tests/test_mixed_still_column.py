@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from conftest import CASES, NoHalo, OneRank, case_of
-from parmps.core import scene
+from parmps.geometry import scene
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.fluid.projection import FluidSolver
 

@@ -19,7 +19,7 @@ import pytest
 
 from conftest import error_lines, run_parmps
 from parmps import config, schema
-from parmps.core import scene
+from parmps.geometry import scene
 from parmps.run import guards
 from parmps.io.frames import read_frames
 from parmps.tools import analysis

@@ -25,7 +25,7 @@ from mpi4py import MPI
 
 from conftest import CASES, error_lines, run_parmps
 from parmps import config, open_result, schema, validation
-from parmps.core import scene
+from parmps.geometry import scene
 from parmps.core.particles import FLUID, WALL
 from parmps.errors import CaseError
 from parmps.probes.sampling import (SampleRows, column_end, kernel_sums, lattice_sum,
@@ -206,7 +206,8 @@ BAD_PROBES = {
                      "probe[0] 'a'.line must be vertical"),
     "outside": ('name = "a"\nkind = "pressure"\nposition = [5.0, 0.1]', "outside the domain"),
     "force without target": ('name = "a"\nkind = "force"',
-                             "probe[0] 'a' needs exactly one of 'segment', 'wall_box' and 'body'"),
+                             "probe[0] 'a' needs exactly one of 'segment', 'wall_box', 'wall' and "
+                             "'body'"),
     "force on no body": ('name = "a"\nkind = "force"\nbody = "gate"', "'gate' is not a body"),
     "segment without normal": ('name = "a"\nkind = "force"\nsegment = [[0.2, 0.0], [0.2, 0.2]]',
                                "missing key 'probe[0] 'a'.normal'"),

@@ -12,9 +12,10 @@ from conftest import error_lines, run_parmps
 from parmps import config, schema, validation
 from parmps.core.geometry import nearest_on_surface, surface_distance, winding_number
 from parmps.errors import CaseError
+from parmps.geometry import mesh, shapes
+from parmps.geometry.mesh import enclosed_volume
 from parmps.solids.mass_spring import shell
 from parmps.solids.mass_spring.model import MassSpringModel
-from parmps.solids.mass_spring.surface import enclosed_volume
 
 
 def observed_orders(errors):
@@ -40,7 +41,7 @@ def test_sphere_volume_converges_at_second_order():
     exact = 4.0 / 3.0 * math.pi * radius ** 3
     errors = []
     for n in (4, 8, 16, 32):
-        vertices, triangles = shell.icosphere(radius, n, center=(1.0, -2.0, 3.0))
+        vertices, triangles = shapes.icosphere(radius, n, center=(1.0, -2.0, 3.0))
         assert len(vertices) == 10 * n * n + 2 and len(triangles) == 20 * n * n
         assert np.allclose(np.linalg.norm(vertices - (1.0, -2.0, 3.0), axis=1), radius)
         errors.append((enclosed_volume(vertices, triangles) - exact) / exact)
@@ -55,7 +56,7 @@ def test_capsule_volume_converges_at_second_order():
     exact = math.pi * radius ** 2 * length + 4.0 / 3.0 * math.pi * radius ** 3
     errors = []
     for n in (4, 8, 16, 32):
-        vertices, triangles = shell.capsule(radius, length, frequency=n)
+        vertices, triangles = shapes.capsule(radius, length, frequency=n)
         extent = np.ptp(vertices, axis=0)
         assert extent == pytest.approx([2 * radius, 2 * radius, length + 2 * radius])
         # Every vertex lies on the capsule: at distance R from its axis segment.
@@ -68,14 +69,14 @@ def test_capsule_volume_converges_at_second_order():
     assert abs(errors[-1]) < 1e-3
 
 
-def evans_fung_volume(diameter, coefficients=shell.RBC_COEFFICIENTS, points=40):
+def evans_fung_volume(diameter, coefficients=shapes.RBC_COEFFICIENTS, points=40):
     """V = int_0^R 2 z(r) 2 pi r dr by Gauss-Legendre in theta, r = R sin(theta): the
     square root of the profile becomes cos(theta) and the integrand a smooth polynomial
     in sin and cos."""
     nodes, weights = np.polynomial.legendre.leggauss(points)
     theta = (nodes + 1.0) * math.pi / 4.0
     r = 0.5 * diameter * np.sin(theta)
-    half = shell.rbc_half_thickness(r, diameter, coefficients)
+    half = shapes.rbc_half_thickness(r, diameter, coefficients)
     integrand = 4.0 * math.pi * half * r * 0.5 * diameter * np.cos(theta)
     return float(np.sum(weights * integrand)) * math.pi / 4.0
 
@@ -83,14 +84,14 @@ def evans_fung_volume(diameter, coefficients=shell.RBC_COEFFICIENTS, points=40):
 def test_evans_fung_profile_has_the_measured_thicknesses():
     # Evans & Fung (1972): D = 7.82 um, 0.81 um thick at the centre, 2.58 +- 0.27 um at
     # the thickest; about 94 um^3 for this mean shape.
-    r = np.linspace(0.0, shell.RBC_DIAMETER / 2, 100001)
-    half = shell.rbc_half_thickness(r)
+    r = np.linspace(0.0, shapes.RBC_DIAMETER / 2, 100001)
+    half = shapes.rbc_half_thickness(r)
     assert 2 * half[0] == pytest.approx(0.81e-6, rel=2e-3)
     assert abs(2 * half.max() - 2.58e-6) < 0.27e-6
-    volume = evans_fung_volume(shell.RBC_DIAMETER)
+    volume = evans_fung_volume(shapes.RBC_DIAMETER)
     assert volume == pytest.approx(94.1e-18, rel=1e-3)
     # The quadrature is converged: half the points give the same number.
-    assert evans_fung_volume(shell.RBC_DIAMETER, points=20) == pytest.approx(volume, rel=1e-12)
+    assert evans_fung_volume(shapes.RBC_DIAMETER, points=20) == pytest.approx(volume, rel=1e-12)
 
 
 def test_red_blood_cell_volume_converges_to_the_evans_fung_integral():
@@ -98,17 +99,17 @@ def test_red_blood_cell_volume_converges_to_the_evans_fung_integral():
     exact = evans_fung_volume(diameter)
     errors = []
     for n in (8, 16, 32, 64):
-        vertices, triangles = shell.red_blood_cell(diameter, frequency=n)
+        vertices, triangles = shapes.red_blood_cell(diameter, frequency=n)
         # Every vertex is on the profile, and the rim is the widest ring.
         # z^2 = g^2 (1 - (2 rho/D)^2) written without the square root, which loses
         # digits at the rim.
         rho = np.hypot(vertices[:, 0], vertices[:, 1])
         s = (rho / diameter) ** 2
-        c0, c1, c2 = shell.RBC_COEFFICIENTS
+        c0, c1, c2 = shapes.RBC_COEFFICIENTS
         g = diameter * (c0 + c1 * s + c2 * s * s)
         assert np.allclose(4 * s + (vertices[:, 2] / g) ** 2, 1.0, rtol=0.0, atol=1e-12)
         assert rho.max() == pytest.approx(diameter / 2)
-        shell.check_closed_surface("rbc", vertices, triangles)
+        mesh.check_closed_surface("rbc", vertices, triangles)
         errors.append((enclosed_volume(vertices, triangles) - exact) / exact)
     assert_second_order(errors)
     assert abs(errors[-1]) < 1e-3
@@ -119,13 +120,13 @@ def test_red_blood_cell_volume_converges_to_the_evans_fung_integral():
 
 
 @pytest.mark.parametrize("make", [
-    lambda: shell.icosphere(1.0, 5),
-    lambda: shell.capsule(1.0, 3.0, edge_length=0.3),
-    lambda: shell.red_blood_cell(frequency=6),
+    lambda: shapes.icosphere(1.0, 5),
+    lambda: shapes.capsule(1.0, 3.0, edge_length=0.3),
+    lambda: shapes.red_blood_cell(frequency=6),
 ])
 def test_edges_and_bending_pairs_obey_eulers_formula(make):
     vertices, triangles = make()
-    edges, bending = shell.edges_and_bending(triangles)
+    edges, bending = mesh.edges_and_bending(triangles)
     n_v, n_e, n_f = len(vertices), len(edges), len(triangles)
     assert 2 * n_e == 3 * n_f
     assert n_v - n_e + n_f == 2
@@ -140,10 +141,10 @@ def test_edges_and_bending_pairs_obey_eulers_formula(make):
 def test_node_areas_share_out_the_whole_area_which_converges():
     errors = []
     for n in (8, 16, 32):
-        vertices, triangles = shell.icosphere(2.0, n)
-        area = shell.node_areas(vertices, triangles)
+        vertices, triangles = shapes.icosphere(2.0, n)
+        area = mesh.node_areas(vertices, triangles)
         assert np.all(area > 0)
-        assert area.sum() == pytest.approx(shell.triangle_areas(vertices, triangles).sum(),
+        assert area.sum() == pytest.approx(mesh.triangle_areas(vertices, triangles).sum(),
                                            rel=1e-12)
         errors.append(area.sum() / (4 * math.pi * 4.0) - 1.0)
     assert_second_order(errors)
@@ -160,18 +161,18 @@ def tetrahedron(offset=(0.0, 0.0, 0.0)):
 
 def refused(vertices, triangles, match):
     with pytest.raises(CaseError, match=match) as info:
-        shell.check_closed_surface("mesh 'hand.stl'", vertices, triangles)
+        mesh.check_closed_surface("mesh 'hand.stl'", vertices, triangles)
     message = str(info.value)
     assert "\n" not in message and message.startswith("mesh 'hand.stl': ")
     return message
 
 
 def test_a_good_mesh_passes_and_gives_its_volume():
-    assert shell.check_closed_surface("tet", *tetrahedron()) == pytest.approx(1 / 6)
+    assert mesh.check_closed_surface("tet", *tetrahedron()) == pytest.approx(1 / 6)
 
 
 def test_an_open_mesh_is_refused_with_its_open_edges_counted():
-    vertices, triangles = shell.icosphere(1.0, 2)
+    vertices, triangles = shapes.icosphere(1.0, 2)
     message = refused(vertices, triangles[1:], "not closed: 3 open edges")
     assert "e.g. the edge between vertices" in message
 
@@ -197,14 +198,14 @@ def test_a_non_manifold_vertex_is_refused():
 
 
 def test_an_inconsistently_oriented_mesh_is_refused():
-    vertices, triangles = shell.icosphere(1.0, 2)
+    vertices, triangles = shapes.icosphere(1.0, 2)
     triangles = triangles.copy()
     triangles[7] = triangles[7, ::-1]
     refused(vertices, triangles, "inconsistent orientation: 3 edges run the same way")
 
 
 def test_an_inward_mesh_is_refused_not_reversed():
-    vertices, triangles = shell.icosphere(1.0, 2)
+    vertices, triangles = shapes.icosphere(1.0, 2)
     refused(vertices, triangles[:, ::-1], "oriented inward .*reverse the triangles")
 
 
@@ -225,13 +226,13 @@ def test_two_separate_surfaces_are_refused():
 
 
 def test_surface_parts_label_each_part_by_its_least_vertex():
-    vertices, triangles = shell.icosphere(1.0, 6)
-    assert np.all(shell.surface_parts(triangles, len(vertices)) == 0)
+    vertices, triangles = shapes.icosphere(1.0, 6)
+    assert np.all(mesh.surface_parts(triangles, len(vertices)) == 0)
     n = len(vertices)
     # Three spheres, the middle one's vertices listed in reverse.
     relabel = np.arange(n)[::-1] + n
     both = np.concatenate([triangles, relabel[triangles], triangles + 2 * n])
-    parts = shell.surface_parts(both, 3 * n)
+    parts = mesh.surface_parts(both, 3 * n)
     assert np.array_equal(parts, np.repeat([0, n, 2 * n], n))
 
 
@@ -246,13 +247,13 @@ def test_an_unused_vertex_is_refused():
 
 
 def test_an_stl_written_by_meshio_reads_back_merged_with_the_same_volume(tmp_path):
-    vertices, triangles = shell.icosphere(0.3, 6, center=(0.1, 0.2, 0.3))
+    vertices, triangles = shapes.icosphere(0.3, 6, center=(0.1, 0.2, 0.3))
     path = tmp_path / "sphere.stl"
     meshio.write(path, meshio.Mesh(vertices, [("triangle", triangles)]), binary=True)
-    read_vertices, read_triangles = shell.read_mesh(path)
+    read_vertices, read_triangles = mesh.read_mesh(path)
     # STL stores 3 corners per triangle: 3 x 720 points become the 362 vertices again.
     assert len(read_vertices) == len(vertices) and len(read_triangles) == len(triangles)
-    volume = shell.check_closed_surface(str(path), read_vertices, read_triangles)
+    volume = mesh.check_closed_surface(str(path), read_vertices, read_triangles)
     # Binary STL is single precision.
     assert volume == pytest.approx(enclosed_volume(vertices, triangles), rel=1e-6)
 
@@ -260,29 +261,29 @@ def test_an_stl_written_by_meshio_reads_back_merged_with_the_same_volume(tmp_pat
 def test_corners_that_differ_by_rounding_are_merged(tmp_path):
     # A triangle soup whose copies of a vertex differ in the last digits (as an exporter
     # that recomputes them writes): meshio's exact merge keeps them apart, read_mesh not.
-    vertices, triangles = shell.capsule(1.0, 2.0, frequency=5)
+    vertices, triangles = shapes.capsule(1.0, 2.0, frequency=5)
     soup = vertices[triangles].reshape(-1, 3)
-    h = np.median(shell.edge_lengths(vertices, triangles))
-    soup = soup + 1e-3 * shell.MERGE_TOLERANCE * h * np.random.default_rng(1).uniform(
+    h = np.median(mesh.edge_lengths(vertices, triangles))
+    soup = soup + 1e-3 * mesh.MERGE_TOLERANCE * h * np.random.default_rng(1).uniform(
         -1, 1, soup.shape)
     path = tmp_path / "soup.stl"
     cells = np.arange(len(soup)).reshape(-1, 3)
     meshio.write(path, meshio.Mesh(soup, [("triangle", cells)]), binary=False)
     assert len(meshio.read(path).points) == len(soup)
-    read_vertices, read_triangles = shell.read_mesh(path)
+    read_vertices, read_triangles = mesh.read_mesh(path)
     assert len(read_vertices) == len(vertices)
-    volume = shell.check_closed_surface("soup", read_vertices, read_triangles)
+    volume = mesh.check_closed_surface("soup", read_vertices, read_triangles)
     assert volume == pytest.approx(enclosed_volume(vertices, triangles), rel=1e-9)
 
 
 def test_a_gmsh_file_keeps_its_triangles_and_skips_its_curves_and_points(tmp_path):
-    vertices, triangles = shell.icosphere(1.0, 3)
+    vertices, triangles = shapes.icosphere(1.0, 3)
     path = tmp_path / "sphere.msh"
     cells = [("vertex", np.array([[0]])), ("line", triangles[:5, :2]), ("triangle", triangles)]
     meshio.write(path, meshio.Mesh(vertices, cells), file_format="gmsh22")
-    read_vertices, read_triangles = shell.read_mesh(path)
+    read_vertices, read_triangles = mesh.read_mesh(path)
     assert len(read_vertices) == len(vertices) and len(read_triangles) == len(triangles)
-    assert shell.check_closed_surface("msh", read_vertices, read_triangles) == pytest.approx(
+    assert mesh.check_closed_surface("msh", read_vertices, read_triangles) == pytest.approx(
         enclosed_volume(vertices, triangles))
 
 
@@ -292,14 +293,14 @@ def test_quads_are_split_and_other_cells_refused(tmp_path):
                       [0, 4, 6, 2], [1, 3, 7, 5]])
     path = tmp_path / "cube.vtk"
     meshio.write(path, meshio.Mesh(cube, [("quad", quads)]))
-    vertices, triangles = shell.read_mesh(path)
+    vertices, triangles = mesh.read_mesh(path)
     assert len(triangles) == 12
-    assert shell.check_closed_surface("cube", vertices, triangles) == pytest.approx(1.0)
+    assert mesh.check_closed_surface("cube", vertices, triangles) == pytest.approx(1.0)
     meshio.write(tmp_path / "tet.vtk", meshio.Mesh(cube[:4], [("tetra", [[0, 1, 2, 4]])]))
     with pytest.raises(CaseError, match="tet.vtk.*has tetra cells; a shell is a surface"):
-        shell.read_mesh(tmp_path / "tet.vtk")
+        mesh.read_mesh(tmp_path / "tet.vtk")
     with pytest.raises(CaseError, match="missing.stl.*cannot be read"):
-        shell.read_mesh(tmp_path / "missing.stl")
+        mesh.read_mesh(tmp_path / "missing.stl")
 
 
 # ---------------------------------------------------------------------------
@@ -325,7 +326,7 @@ def check_fill(points, spacing, distance, band):
 def sag_bound(vertices, triangles, radius):
     """How far an inscribed mesh may lie inside its surface of curvature radius R: a
     triangle of circumradius rho <= its longest edge / sqrt(3) sags by rho^2/(2R)."""
-    return shell.edge_lengths(vertices, triangles).max() ** 2 / (6.0 * radius)
+    return mesh.edge_lengths(vertices, triangles).max() ** 2 / (6.0 * radius)
 
 
 # A lattice origin in general position: no lattice point on the analytic surface.
@@ -336,16 +337,16 @@ def check_count(vertices, triangles, spacing, exact, radius):
     """The fill's points times l0^3 against the analytic volume: the lattice-point
     discrepancy of a smooth convex body grows slower than its surface in lattice
     units, under (R/l0)^1.5 points, a relative (l0/R)^1.5."""
-    points = shell.fill_inside(vertices, triangles, spacing, origin=GENERIC * spacing)
+    points = mesh.fill_inside(vertices, triangles, spacing, origin=GENERIC * spacing)
     assert abs(len(points) * spacing ** 3 - exact) / exact < (spacing / radius) ** 1.5
 
 
 @pytest.mark.parametrize("spacing", [0.1, 0.05])
 def test_sphere_fill_matches_the_ball_and_its_volume(spacing):
     radius = 1.0
-    vertices, triangles = shell.icosphere(radius, 16)
+    vertices, triangles = shapes.icosphere(radius, 16)
     # A lattice through the centre: columns run through vertices and along edges.
-    points = shell.fill_inside(vertices, triangles, spacing)
+    points = mesh.fill_inside(vertices, triangles, spacing)
     check_fill(points, spacing, lambda p: np.linalg.norm(p, axis=1) - radius,
                sag_bound(vertices, triangles, radius))
     check_count(vertices, triangles, spacing, 4.0 / 3.0 * math.pi * radius ** 3, radius)
@@ -356,8 +357,8 @@ def test_capsule_fill_matches_the_capsule_and_its_volume(spacing):
     radius, length = 0.5, 1.0
     # Octahedral caps put vertices and edges right on lattice columns and rows: the
     # columns through them must still cross the surface exactly once each way.
-    vertices, triangles = shell.capsule(radius, length, frequency=16)
-    points = shell.fill_inside(vertices, triangles, spacing)
+    vertices, triangles = shapes.capsule(radius, length, frequency=16)
+    points = mesh.fill_inside(vertices, triangles, spacing)
 
     def distance(p):
         z = np.clip(p[:, 2], -length / 2, length / 2)
@@ -369,18 +370,18 @@ def test_capsule_fill_matches_the_capsule_and_its_volume(spacing):
 
 
 @pytest.mark.parametrize("make, spacing", [
-    (lambda: shell.capsule(0.5, 1.0, frequency=8), 0.125),
-    (lambda: shell.red_blood_cell(8.0, frequency=8), 0.25),
+    (lambda: shapes.capsule(0.5, 1.0, frequency=8), 0.125),
+    (lambda: shapes.red_blood_cell(8.0, frequency=8), 0.25),
 ])
 def test_fill_points_inside_and_the_winding_number_agree(make, spacing):
     vertices, triangles = make()
     # A lattice through the origin: its columns run through the poles and the
     # capsule's vertical edges, and some of its points lie on the surface.
-    points = shell.fill_inside(vertices, triangles, spacing)
+    points = mesh.fill_inside(vertices, triangles, spacing)
     axes = [np.arange(math.floor(a / spacing) - 1, math.ceil(b / spacing) + 2) * spacing
             for a, b in zip(vertices.min(axis=0), vertices.max(axis=0))]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    inside = shell.points_inside(grid, vertices, triangles)
+    inside = mesh.points_inside(grid, vertices, triangles)
     # The same rays: the same answer, points on the surface included.
     assert np.array_equal(np.sort(np.round(points / spacing).astype(int), axis=0),
                           np.sort(np.round(grid[inside] / spacing).astype(int), axis=0))
@@ -392,11 +393,11 @@ def test_fill_points_inside_and_the_winding_number_agree(make, spacing):
 
 
 def test_points_inside_random_points_against_the_winding_number():
-    vertices, triangles = shell.red_blood_cell(8.0, frequency=12, center=(0.3, -0.2, 0.1))
+    vertices, triangles = shapes.red_blood_cell(8.0, frequency=12, center=(0.3, -0.2, 0.1))
     rng = np.random.default_rng(3)
     lower, upper = vertices.min(axis=0) - 0.5, vertices.max(axis=0) + 0.5
     points = rng.uniform(lower, upper, size=(4000, 3))
-    inside = shell.points_inside(points, vertices, triangles)
+    inside = mesh.points_inside(points, vertices, triangles)
     winding = winding_number(points, vertices, triangles)
     assert np.all(np.abs(winding - np.round(winding)) < 1e-6)
     assert np.array_equal(inside, np.round(winding) == 1)
@@ -457,15 +458,15 @@ def test_a_red_blood_cell_body_turned_to_y():
     body = build('type = "shell"\nshape = "red_blood_cell"\naxis = "y"\nrefinement = 8\n'
                  'center = [0.1, 0.2, 0.3]\nstiffness = 1e-6\nsurface_density = 1e-3')
     extent = np.ptp(body.position, axis=0)
-    assert extent[[0, 2]] == pytest.approx([shell.RBC_DIAMETER] * 2)
-    assert extent[1] == pytest.approx(2 * shell.rbc_half_thickness(
-        np.linspace(0, shell.RBC_DIAMETER / 2, 100001)).max(), rel=1e-3)
+    assert extent[[0, 2]] == pytest.approx([shapes.RBC_DIAMETER] * 2)
+    assert extent[1] == pytest.approx(2 * shapes.rbc_half_thickness(
+        np.linspace(0, shapes.RBC_DIAMETER / 2, 100001)).max(), rel=1e-3)
     assert body.position.mean(axis=0) == pytest.approx([0.1, 0.2, 0.3])
-    assert body.rest_volume == pytest.approx(evans_fung_volume(shell.RBC_DIAMETER), rel=3e-2)
+    assert body.rest_volume == pytest.approx(evans_fung_volume(shapes.RBC_DIAMETER), rel=3e-2)
 
 
 def test_a_mesh_file_body_is_read_and_moved(tmp_path):
-    vertices, triangles = shell.capsule(0.1, 0.2, frequency=4)
+    vertices, triangles = shapes.capsule(0.1, 0.2, frequency=4)
     path = tmp_path / "capsule.obj"
     meshio.write(path, meshio.Mesh(vertices, [("triangle", triangles)]))
     body = build(f'type = "shell"\nshape = "file"\nmesh = "{path}"\ncenter = [0.5, 0, 0]\n'
@@ -506,7 +507,7 @@ def test_bad_shell_bodies_are_refused_in_one_line(body, dimension, match):
 
 
 def test_a_bad_mesh_file_is_refused_before_the_run_naming_it(tmp_path):
-    vertices, triangles = shell.icosphere(0.5, 3)
+    vertices, triangles = shapes.icosphere(0.5, 3)
     path = tmp_path / "leaky.stl"
     meshio.write(path, meshio.Mesh(vertices, [("triangle", triangles[1:])]))
     case = tmp_path / "leaky.toml"
@@ -547,7 +548,7 @@ def _brute_distance(points, vertices, triangles):
 
 
 def test_the_distance_to_a_surface_is_the_least_over_its_triangles():
-    vertices, triangles = shell.capsule(0.03, 0.04, 0.01)
+    vertices, triangles = shapes.capsule(0.03, 0.04, 0.01)
     rng = np.random.default_rng(3)
     points = rng.uniform(vertices.min(axis=0) - 0.02, vertices.max(axis=0) + 0.02, (400, 3))
     exact = _brute_distance(points, vertices, triangles)
@@ -566,7 +567,7 @@ def test_the_distance_to_a_surface_is_the_least_over_its_triangles():
     np.testing.assert_allclose(np.linalg.norm(points[within] - nearest, axis=1),
                                exact[within], rtol=0, atol=1e-15)
     # On a sphere: |r - R| to the inscribed mesh's accuracy (its sag, below 1 % of R here).
-    vertices, triangles = shell.icosphere(1.0, 16)
+    vertices, triangles = shapes.icosphere(1.0, 16)
     radius = np.linalg.norm(points - points.mean(axis=0), axis=1)
     direction = (points - points.mean(axis=0)) / radius[:, None]
     shells = direction * rng.uniform(0.8, 1.2, len(points))[:, None]
@@ -582,9 +583,9 @@ def test_the_fluid_left_out_beside_a_shell_is_as_many_points_as_it_has_nodes(edg
     the mesh is at least as fine as the fluid; a coarser mesh clears half a spacing, which
     holds more points than the mesh has nodes."""
     spacing = 1.0
-    vertices, triangles = shell.icosphere(5.0, edge_length=edge * spacing)
+    vertices, triangles = shapes.icosphere(5.0, edge_length=edge * spacing)
     clearance = shell.fluid_clearance(vertices, triangles, spacing)
-    per_node = shell.triangle_areas(vertices, triangles).sum() / len(vertices)
+    per_node = mesh.triangle_areas(vertices, triangles).sum() / len(vertices)
     assert clearance == pytest.approx(max(0.5, 0.5 / per_node))
     axis = np.arange(-7, 8) + 0.5
     lattice = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)

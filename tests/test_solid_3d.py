@@ -13,13 +13,14 @@ import pytest
 
 from parmps import config, open_result, schema, validation
 from parmps.errors import CaseError
+from parmps.geometry.mesh import enclosed_volume
 from parmps.solids.mass_spring.body import (Body, boundary_facets, damping_forces, spring_forces,
                                             volume_multiplier)
 from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.mass_spring.kernels import held_force_substeps, network_forces
 from parmps.solids.mass_spring.lattice import AXIAL, FACE_DIAGONAL, lattice_geometry
 from parmps.solids.mass_spring.model import MassSpringModel
-from parmps.solids.mass_spring.surface import enclosed_volume, volume_gradient
+from parmps.solids.mass_spring.surface import volume_gradient
 from test_solid import load_case, run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from conftest import CASES, NoHalo, OneRank, case_of
-from parmps.core import kernels, scene
+from parmps.core import kernels
+from parmps.geometry import scene
 from parmps.fluid import projection
 from parmps.fluid.projection import FluidSolver
 

@@ -40,7 +40,7 @@ from parmps.errors import CaseError
 from parmps.fluid.participant import Participant
 from parmps.core.particles import FLUID, INFLOW, Particles
 from parmps.core.geometry import format_point
-from parmps.core.scene import lattice_count, lattice_points
+from parmps.geometry.scene import lattice_count, lattice_points
 
 log = logging.getLogger(__name__)
 

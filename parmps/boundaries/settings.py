@@ -82,8 +82,8 @@ def check(case):
     time = case["time"]
     if time["fixed_dt"] > 0:
         # A wall's speed is known now: a fixed step too long for it is a case error.
-        for kind in WALL_SECTIONS:
-            for k, item in enumerate(case[kind]):
+        for kind in (*WALL_SECTIONS, "wall"):
+            for k, item in enumerate(case.get(kind, ())):
                 speed = math.hypot(*item["velocity"])
                 if speed * time["fixed_dt"] > time["cfl"] * case["particles"]["spacing"]:
                     raise CaseError(

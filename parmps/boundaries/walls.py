@@ -7,7 +7,7 @@ otherwise. Its displacement is a function of the time alone,
 does not depend on the step sizes: each step adds ``d(t + dt) - d(t)``, which
 telescopes to ``d(t)`` up to round-off.
 
-Which particles. :func:`parmps.core.scene.build` numbers particles in the order of
+Which particles. :func:`parmps.geometry.scene.build` numbers particles in the order of
 the case's geometry entries, so each tank or wall box owns one contiguous block
 of global ids. Ids never change, so the block finds the wall's particles on any
 rank after any migration or rebalance without a per-particle field to carry.
@@ -37,7 +37,8 @@ from parmps.errors import CaseError
 from parmps.fluid.forces import pressure_force_from
 from parmps.fluid.participant import Participant
 
-SECTIONS = ("tank", "wall_box")
+# The walls that may move: tanks, wall boxes and walls of any shape (parmps.geometry).
+SECTIONS = ("tank", "wall_box", "wall")
 
 
 def travel(spec, time):

@@ -11,6 +11,7 @@ import importlib
 
 CHECKS = {
     "body_crossing": "parmps.checks.crossing:BodyCrossing",
+    "wall_crossing": "parmps.checks.walls:WallCrossing",
 }
 
 

@@ -1,10 +1,11 @@
-"""Case sections of the scene: the domain, the particle lattice, gravity, fluid blocks."""
+"""Case sections of the scene: the domain, the particle lattice, gravity (the fluid blocks
+and the walls of any shape are parmps.geometry.settings's)."""
 
-from parmps.config import ZERO, Key, PerDimension, Section, check_ordered_box
+from parmps.config import ZERO, Key, PerDimension, Section
 from parmps.errors import CaseError
 
 # Sections whose entries are particles on the lattice and so need particles.spacing.
-PARTICLE_SECTIONS = ("fluid_block", "tank", "wall_box", "inlet", "outlet")
+PARTICLE_SECTIONS = ("fluid_block", "tank", "wall_box", "wall", "inlet", "outlet")
 
 SECTIONS = {
     "domain": Section({
@@ -33,16 +34,14 @@ SECTIONS = {
                         "metres (a benchmark's) runs at any spacing, each face within half a "
                         "spacing of where it was given; probes with a normal move onto the "
                         "face as built"),
-        "origin": Key("vector", ZERO, doc="with snap: a point of the lattice's lines [m]"),
+        "origin": Key("vector", ZERO, doc="a point of the lattice's lines [m]: the boxes' "
+                                          "corners with snap, and the lattice that walls "
+                                          "and fluid of a mesh or shape are laid on "
+                                          "(origin + (i + 1/2) l0)"),
     }),
     "physics": Section({
         "gravity": Key("vector", PerDimension(-9.81), doc="[m/s^2]"),
     }),
-    "fluid_block": Section({
-        "lower": Key("vector", doc="lower corner of the block [m]"),
-        "upper": Key("vector", doc="upper corner of the block [m]"),
-        "velocity": Key("vector", ZERO, doc="initial velocity of its particles [m/s]"),
-    }, many=True, doc="a rectangle filled with fluid particles on the l0 lattice"),
 }
 
 
@@ -77,8 +76,6 @@ def check(case):
                             f"domain.lower.{label} ({lower[axis]})")
     if case["particles"]["snap"] and case["particles"]["spacing"] is not None:
         snap_boxes(case)
-    for k, block in enumerate(case["fluid_block"]):
-        check_ordered_box(f"fluid_block[{k}]", block)
 
 
 # The sections whose entries are boxes of particles (lower, upper corners).
@@ -97,6 +94,8 @@ def snap_boxes(case):
     that touched still touch, and each face moves by at most half a spacing."""
     for name in BOX_SECTIONS:
         for box in case.get(name, ()):
+            if box["lower"] is None:  # a fluid block of a shape and no clipping box
+                continue
             box["lower"] = snap_to_lattice(box["lower"], case)
             box["upper"] = snap_to_lattice(box["upper"], case)
 
@@ -109,7 +108,7 @@ def search_radius(case):
 
 
 # The geometry that makes a case a fluid case; bodies alone run without a fluid.
-FLUID_GEOMETRY = ("fluid_block", "tank", "wall_box")
+FLUID_GEOMETRY = ("fluid_block", "tank", "wall_box", "wall")
 
 
 def has_fluid(case):

@@ -37,9 +37,11 @@ class Probe:
     sample stands for (in 2D per metre of depth, ``DEPTH``) and ``normals`` its normal.
     """
 
-    def __init__(self, spec, spacing, dimension=2, rest=None, boxes=()):
+    def __init__(self, spec, spacing, dimension=2, rest=None, boxes=(), walls=None):
         """``rest``: a displacement probe's nodes' mean rest position; ``boxes``: the case's
-        wall boxes ``(lower, upper)`` (a force probe on a wall box)."""
+        wall boxes ``(lower, upper)`` (a force probe on a wall box); ``walls``: name ->
+        (points, lengths or areas, normals into the fluid) on the surface of each named
+        [[wall]] (a force probe on one)."""
         self.name = spec["name"]
         self.kind = spec["kind"]
         self.spec = spec
@@ -66,6 +68,8 @@ class Probe:
             count = int(math.floor((top[-1] - bottom[-1]) / step + 1e-9)) + 1
             self.rows = [(bottom, np.eye(dimension)[-1], step, count, None, 1.0, 1)]
             self.heights = bottom[-1] + step * np.arange(count)
+        elif self.kind == "force" and spec.get("wall"):
+            self._add_samples(*walls[spec["wall"]], spacing)
         elif self.kind == "force" and not spec["body"]:
             for lower, upper, outward in self._faces(spec, boxes):
                 self._add_patch(lower, upper, outward, spacing)
@@ -109,6 +113,16 @@ class Probe:
         self.area.append(du * (dv if v is not None else DEPTH))
         self.normals.append(normal)
 
+    def _add_samples(self, points, weights, normals, spacing):
+        """One sample a row at each of ``points`` on a wall's surface, moved half a spacing
+        along its normal (into the fluid) onto the first fluid layer, standing for its
+        length (2D, times DEPTH) or area (3D)."""
+        for point, weight, normal in zip(points, weights, normals):
+            self.rows.append((point + 0.5 * spacing * normal, np.eye(self.dimension)[0],
+                              spacing, 1, None, 1.0, 1))
+            self.area.append(weight * (DEPTH if self.dimension == 2 else 1.0))
+            self.normals.append(normal)
+
     @property
     def sample_count(self):
         return sum(row[3] * row[6] for row in self.rows)
@@ -124,6 +138,8 @@ class Probe:
             out["body"] = self.spec["body"]
         if self.kind == "force" and not self.spec["body"] and self.spec["wall_box"] >= 0:
             out["wall_box"] = self.spec["wall_box"]
+        if self.kind == "force" and self.spec.get("wall"):
+            out["wall"] = self.spec["wall"]
         if self.rows:
             out["radius"] = self.radius
             out["min_fill"] = self.min_fill
@@ -162,15 +178,17 @@ class Probes(Observer):
     name = "probes"
 
     def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=(),
-                 dimension=2, boxes=()):
+                 dimension=2, boxes=(), walls=None):
         """``bodies``: the case's [[body]] tables (a displacement probe's rest positions);
-        ``boxes``: the case's wall boxes as ``(lower, upper)`` (a force probe on one)."""
+        ``boxes``: the case's wall boxes as ``(lower, upper)`` (a force probe on one);
+        ``walls``: the named walls' surface samples (see :class:`Probe`)."""
         self.result = result
         self.comm = result.comm
         self.model = model
         by_name = {spec["name"] or f"body{k}": spec for k, spec in enumerate(bodies)}
         self.probes = [Probe(spec, spacing, dimension, rest_positions(by_name[spec["body"]])[
-            spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None, boxes)
+            spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None, boxes,
+            walls)
             for spec in specs]
         self.cadences = [SimulatedInterval(p.spec["interval"], end_time)
                          if p.spec["interval"] > 0 else None for p in self.probes]

@@ -13,9 +13,10 @@ KINDS = ("pressure", "level", "force", "displacement")
 
 # Which of the geometric keys each kind takes (the others must be left out).
 _GEOMETRY = {"pressure": ("position", "normal"), "level": ("line",),
-             "force": ("segment", "patch", "wall_box", "normal", "body"),
+             "force": ("segment", "patch", "wall_box", "wall", "normal", "body"),
              "displacement": ("body", "nodes")}
-_GEOMETRY_KEYS = ("position", "line", "segment", "patch", "wall_box", "normal", "body", "nodes")
+_GEOMETRY_KEYS = ("position", "line", "segment", "patch", "wall_box", "wall", "normal", "body",
+                  "nodes")
 
 SECTIONS = {
     "probe": Section({
@@ -46,6 +47,8 @@ SECTIONS = {
         "wall_box": Key("int", -1, ge=-1,
                         doc="force: the index k of a fixed [[wall_box]] (0 for the first): "
                             "the fluid's pressure force on all its faces; -1: none"),
+        "wall": Key("str", "", doc="force: the name of a fixed [[wall]] (of any shape): the "
+                                   "fluid's pressure force on all its surface"),
         "body": Key("str", "", doc="force: the body's name (the sum over its nodes); "
                                    "displacement: the body whose nodes are followed"),
         "nodes": Key("ints", [], ge=0,
@@ -165,12 +168,16 @@ def _check_force(case, label, probe):
     if probe[other]:
         raise CaseError(f"{label}.{other} is for a {5 - case['dimension']}D case; "
                         f"this one is {case['dimension']}D: give {piece}")
-    given = [key for key in (piece, "wall_box", "body") if probe[key] not in ([], "", -1)]
+    given = [key for key in (piece, "wall_box", "wall", "body")
+             if probe[key] not in ([], "", -1)]
     if len(given) != 1:
-        raise CaseError(f"{label} needs exactly one of '{piece}', 'wall_box' and 'body'"
-                        + (f" (it has {', '.join(given)})" if given else ""))
+        raise CaseError(f"{label} needs exactly one of '{piece}', 'wall_box', 'wall' and "
+                        f"'body'" + (f" (it has {', '.join(given)})" if given else ""))
     if probe["wall_box"] >= 0:
         _check_wall_box(case, label, probe)
+        return
+    if probe["wall"]:
+        _check_wall(case, label, probe)
         return
     if probe["body"]:
         body = probe["body"]
@@ -215,6 +222,19 @@ def _check_wall_box(case, label, probe):
     if probe["normal"] is not None:
         raise CaseError(f"{label}.normal is not a key of a force probe on a wall box (each "
                         f"face's normal points out of the box)")
+
+
+def _check_wall(case, label, probe):
+    walls = {spec["name"]: spec for spec in case["wall"] if spec["name"]}
+    if probe["wall"] not in walls:
+        raise CaseError(f"{label}.wall '{probe['wall']}' is not the name of a [[wall]] of the "
+                        f"case ({', '.join(walls) or 'it has no named wall'})")
+    if any(walls[probe["wall"]]["velocity"]):
+        raise CaseError(f"{label}.wall '{probe['wall']}' moves: a force probe follows fixed "
+                        f"walls only")
+    if probe["normal"] is not None:
+        raise CaseError(f"{label}.normal is not a key of a force probe on a wall (the "
+                        f"normals are its surface's, pointing into the fluid)")
 
 
 def _inside(case, name, point):

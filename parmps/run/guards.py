@@ -14,6 +14,8 @@ communicator before anyone raises.
   wall's own particles: the wall has leaked. A particle cannot cross a whole
   wall (at least two wall layers plus dummies) between two checks without a
   Courant number above 1, which the time loop stops first.
+- :func:`check_shaped_walls`: the same for the walls of any shape (``[[wall]]``), by
+  their surface's signed distance (:class:`parmps.geometry.walls.MaterialDepth`).
 - a blown-up body is the solid model's own check (``SolidModel.check``; for
   mass-spring bodies :mod:`parmps.solids.mass_spring.model`).
 """
@@ -84,6 +86,22 @@ def inside_rectangles(position, rectangles, margin, mask=None):
     return first_box_holding(position, lower, upper, mask)
 
 
+def check_shaped_walls(particles, walls, case, time, spacing, comm, step, source_settings=()):
+    """Stop if an owned fluid particle sits deeper than WALL_MARGIN in the material of a
+    wall of any shape (``walls``: a MaterialDepth of the case's [[wall]]s)."""
+    if not walls:
+        return
+    n = particles.n_owned
+    fluid = np.flatnonzero(particles.kind[:n] == FLUID)
+    shifts = [travel(spec, time) for spec in case["wall"]]
+    depth, which = walls.depth(particles.position[fluid], shifts)
+    inside = np.full(n, -1, np.int64)
+    leaked = depth > WALL_MARGIN * spacing
+    inside[fluid[leaked]] = which[leaked]
+    _report(particles, inside, [walls.label(k) for k in range(len(case["wall"]))], comm,
+            step, source_settings)
+
+
 def check_wall_penetration(particles, rectangles, spacing, comm, step, source_settings=()):
     """Stop if an owned fluid particle sits inside wall material (see the module notes);
     ``source_settings``: the case's PPE source's settings that strengthen it, named in the
@@ -94,6 +112,14 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step, source_se
     position = particles.position[:n]
     which = inside_rectangles(position, rectangles, WALL_MARGIN * spacing,
                               mask=particles.kind[:n] == FLUID)
+    _report(particles, which, [name for _, _, name in rectangles], comm, step,
+            source_settings)
+
+
+def _report(particles, which, names, comm, step, source_settings):
+    """Raise, on every rank alike, if an owned particle has a wall in ``which`` (its index
+    into ``names``, -1 for none)."""
+    position = particles.position[:particles.n_owned]
     hit = np.flatnonzero(which >= 0)
     local = None
     if len(hit):
@@ -106,7 +132,7 @@ def check_wall_penetration(particles, rectangles, spacing, comm, step, source_se
         count = sum(item[3] for item in found)
         raise RunFailure(
             f"step {step}: fluid particle {pid} went through a wall: it is inside "
-            f"{rectangles[k][2]} at {format_point(point, '.4g')} ({count} fluid particles inside "
+            f"{names[k]} at {format_point(point, '.4g')} ({count} fluid particles inside "
             f"walls); "
             f"the wall's pressure did not hold it back (weak PPE source: "
             f"{', '.join([*source_settings, 'mps.compressibility'])}) or the step is too "

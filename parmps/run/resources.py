@@ -9,6 +9,8 @@ in an allocation.
 import math
 import os
 
+from parmps.geometry.walls import shape_bounds
+
 
 # Fitted to the peak resident memory of the dam breaks on 2 ranks (the interpreter and
 # libraries included; python -m parmps bench [--scene dam_break_3d] --particles 1000000
@@ -30,8 +32,20 @@ def particle_estimate(case):
     if spacing is None:
         return sum(max(spec["nx"], 1) * max(spec["ny"], 1) for spec in case.get("body", ()))
     area = 0.0
+    d = case.get("dimension", 2)
     for block in case.get("fluid_block", ()):
-        area += math.prod(u - l for u, l in zip(block["upper"], block["lower"]))
+        # A block of a shape or a mesh: its bounding box (a mesh's when clipped, else 0).
+        box = shape_bounds(block) if block.get("shape") or block.get("mesh") else \
+            (block["lower"], block["upper"])
+        if box is not None:
+            area += math.prod(u - l for u, l in zip(box[1], box[0]))
+    for spec in case.get("wall", ()):
+        box = shape_bounds(spec)
+        if box is not None:
+            # The layers' shell about the bounding box, an upper bound of the band.
+            thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
+            area += math.prod(u - l + 2 * thick for u, l in zip(box[1], box[0])) - \
+                math.prod(max(u - l - 2 * thick, 0.0) for u, l in zip(box[1], box[0]))
     for spec in case.get("tank", ()):
         thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
         inner = [u - l for u, l in zip(spec["upper"], spec["lower"])]
@@ -43,7 +57,7 @@ def particle_estimate(case):
         area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
     for spec in case.get("inlet", ()):
         area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
-    return area / spacing ** case.get("dimension", 2)
+    return area / spacing ** d
 
 
 def memory_estimate(case):

@@ -75,7 +75,7 @@ class Simulation:
         log.info("continuing from the checkpoint at step %d, t = %.6g s (written on %d "
                  "rank(s))", self.state.step, self.state.time, self.checkpoint.ranks)
     def _set_up_fluid(self):
-        from parmps.core import scene
+        from parmps.geometry import scene
         from parmps.fluid.projection import FluidSolver
         from parmps.parallel import create_decomposition
         case, comm = self.case, self.comm
@@ -156,11 +156,13 @@ class Simulation:
             found.append(observing.BodySeries(result, self.model, self.coupling, interval,
                                               self.end_time))
         if case["probe"]:
+            from parmps.geometry.walls import probed_walls
             from parmps.probes.observer import Probes
             found.append(Probes(result, case["probe"], case["particles"]["spacing"],
                                 self.model, interval, self.end_time, case["body"],
                                 case["dimension"],
-                                [(box["lower"], box["upper"]) for box in case["wall_box"]]))
+                                [(box["lower"], box["upper"]) for box in case["wall_box"]],
+                                probed_walls(case)))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)

@@ -25,6 +25,7 @@ from parmps.core.particles import FLUID
 from parmps.errors import RunFailure
 from parmps.fluid import energy
 from parmps.fluid.projection import check_finite, max_speed
+from parmps.geometry.walls import MaterialDepth
 from parmps.run import guards
 from parmps.run.escaped import EscapedFluid
 from parmps.run.timestep import Limit
@@ -63,6 +64,8 @@ class FluidStepper:
         self.fluid = fluid
         self.participants = list(participants)
         self.spacing = case["particles"]["spacing"]
+        # The walls of any shape, for the guard (their meshes read once, here).
+        self.shaped_walls = MaterialDepth(case) if case.get("wall") else None
         # What a wall-penetration message names: the source's relaxation, if it has one.
         source = case["mps"]["source"]
         has_relaxation = "relaxation" in case["mps"][source]
@@ -223,6 +226,8 @@ class FluidStepper:
         # step was too long should be reported as the Courant breach it is.
         guards.check_wall_penetration(particles, guards.wall_rectangles(self.case, state.time),
                                       self.spacing, comm, step, self.source_settings)
+        guards.check_shaped_walls(particles, self.shaped_walls, self.case, state.time,
+                                  self.spacing, comm, step, self.source_settings)
         self.fluid_speed = speed
 
     def particle_owner(self, pid):

@@ -83,11 +83,14 @@ def gravity(case):
 
 def fluid_extent(case):
     """Lower-left and upper-right corners of the bounding box of a case's fluid blocks."""
-    blocks = case["fluid_block"]
-    if not blocks:
-        raise ValueError("the case has no [[fluid_block]]")
-    lower = np.min([block["lower"] for block in blocks], axis=0)
-    upper = np.max([block["upper"] for block in blocks], axis=0)
+    from parmps.geometry.walls import shape_bounds
+
+    boxes = [shape_bounds(block) for block in case["fluid_block"]]
+    boxes = [box for box in boxes if box is not None]  # a mesh's is known once it is read
+    if not boxes:
+        raise ValueError("the case has no [[fluid_block]] of a known extent")
+    lower = np.min([box[0] for box in boxes], axis=0)
+    upper = np.max([box[1] for box in boxes], axis=0)
     return lower, upper
 
 

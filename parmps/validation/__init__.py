@@ -246,5 +246,7 @@ def scaled_overrides(raw, factor):
     for section in ("fluid_block", "tank", "wall_box"):
         for index, table in enumerate(raw.get(section, [])):
             for key in ("lower", "upper"):
-                overrides.append(f"{section}.{index}.{key}={[v * factor for v in table[key]]}")
+                if key in table:  # a fluid block of a mesh or shape may have no box
+                    overrides.append(f"{section}.{index}.{key}="
+                                     f"{[v * factor for v in table[key]]}")
     return overrides

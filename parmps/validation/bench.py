@@ -110,7 +110,7 @@ TARGET_END_TIME = 0.5
 def spacing_for(target, scene_name="dam_break"):
     """The l0 = a/m (a the case's column width) whose dam-break scene holds closest to
     ``target`` particles."""
-    from parmps.core import scene
+    from parmps.geometry import scene
     from parmps.tools import analysis
     if scene_name in BUILT_SCENES:
         # Sized in cells, not by a target count.
@@ -135,7 +135,7 @@ def spacing_for(target, scene_name="dam_break"):
 def _spacing_3d(target, scene_name):
     """The spacing whose 3D scene holds about ``target`` particles: the count goes as
     l0^-3, corrected by building the scene twice."""
-    from parmps.core import scene
+    from parmps.geometry import scene
     spacing = _case(None, scene_name=scene_name)["particles"]["spacing"]
     total = None
     for _ in range(3):

@@ -42,9 +42,10 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
+from parmps.geometry.mesh import determinant_terms, enclosed_volume
 from parmps.solids.mass_spring.kernels import body_substeps, held_force_substeps, network_forces
 from parmps.solids.mass_spring.statics import highest_frequency, stiffness_matrix
-from parmps.solids.mass_spring.surface import determinant_terms, enclosed_volume, volume_gradient
+from parmps.solids.mass_spring.surface import volume_gradient
 
 log = logging.getLogger(__name__)
 

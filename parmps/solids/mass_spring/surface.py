@@ -1,4 +1,5 @@
-"""The volume a closed boundary encloses, and its gradient, in any dimension d.
+"""The gradient of the volume a closed boundary encloses, in any dimension d (the volume
+itself is :func:`parmps.geometry.mesh.enclosed_volume`).
 
 A body's boundary is a set of facets, each d node indices in an order that
 makes it face outward: in 2D the edges (i, i+1) of the counter-clockwise loop,
@@ -23,50 +24,11 @@ without the cancellation of large terms for a small body far from the origin.
 """
 
 import math
-from itertools import permutations
 
 import numpy as np
 
-
-def _permutations(d):
-    """Every permutation of range(d) with its sign: the terms of a d x d determinant."""
-    out = []
-    for p in permutations(range(d)):
-        inversions = sum(p[a] > p[b] for a in range(d) for b in range(a + 1, d))
-        out.append((p, -1.0 if inversions % 2 else 1.0))
-    return out
-
-
-def determinant_terms(d):
-    """(permutations (d!, d) int64, signs (d!,), d!) as arrays, for the compiled
-    kernels.facet_volume."""
-    terms = _permutations(d)
-    return (np.array([p for p, _ in terms], dtype=np.int64),
-            np.array([sign for _, sign in terms]), float(math.factorial(d)))
-
-
-def _corners(position, facets):
-    """(m, d, d) facet corner positions about the apex: [facet, corner, component]."""
-    position = np.asarray(position, dtype=float)
-    facets = np.asarray(facets, dtype=np.int64)
-    apex = position[facets[0, 0]] if len(facets) else 0.0
-    return position[facets] - apex
-
-
-def enclosed_volume(position, facets):
-    """V = 1/d! sum det[x_a; x_b; ...] over ``facets`` (m, d) of ``position`` (n, d).
-
-    Positive when the facets face outward; the area in 2D.
-    """
-    x = _corners(position, facets)
-    d = x.shape[-1]
-    determinant = np.zeros(len(x))
-    for p, sign in _permutations(d):
-        term = sign * x[:, 0, p[0]]
-        for r in range(1, d):
-            term = term * x[:, r, p[r]]
-        determinant += term
-    return float(determinant.sum()) / math.factorial(d)
+# The volume itself is the geometry's (parmps.geometry.mesh); its gradient is the body's.
+from parmps.geometry.mesh import _corners, _permutations
 
 
 def volume_gradient(position, facets):

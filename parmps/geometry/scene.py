@@ -1,4 +1,4 @@
-"""Geometry: turn the case's fluid blocks, tanks and wall boxes into particles.
+"""The scene: turn the case's fluid blocks, tanks, wall boxes and walls into particles.
 
 Every rank builds the same global scene (it is cheap next to one time step) and
 keeps the particles of its own slab, so global ids depend on the case alone and
@@ -8,11 +8,13 @@ surface it models, as the fluid's first layer lies half a spacing inside.
 """
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from parmps.core.geometry import format_point, outside_box
-from parmps.errors import CaseError
 from parmps.core.neighbours import close_pairs
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
+from parmps.errors import CaseError
+from parmps.geometry.walls import fluid_particles, surface_of, wall_particles
 
 # Coordinates that should land on the lattice may be off by rounding only.
 _LATTICE_TOLERANCE = 1e-6
@@ -58,10 +60,107 @@ def _counts(name, spec, spacing):
 AXIS_EXTENT = ("width", "height", "depth")
 
 
-def fluid_block(block, spacing, name):
-    position, _ = _lattice(block["lower"], _counts(name, block, spacing), spacing)
+def fluid_block(block, spacing, name, case=None, walls=None):
+    """A box of the lattice ``lower + (i + 1/2) l0``, or the inside of a mesh or shape on
+    the case's lattice (parmps.geometry.walls), less what the walls of any shape take."""
+    if block.get("shape") or block.get("mesh"):
+        position = fluid_particles(name, block, surface_of(name, block, domain_box(case)),
+                                   case["particles"]["origin"], spacing)
+        position = clear_of_walls(position, walls, case, spacing, every_wall=True)
+    else:
+        position, _ = _lattice(block["lower"], _counts(name, block, spacing), spacing)
+        if case is not None and case.get("wall"):
+            position = clear_of_walls(position, walls, case, spacing, every_wall=False)
     velocity = np.tile(np.asarray(block["velocity"], dtype=float), (len(position), 1))
     return position, np.full(len(position), FLUID, np.int8), velocity
+
+
+def domain_box(case):
+    """The domain's (lower, upper) corners."""
+    return case["domain"]["lower"], case["domain"]["upper"]
+
+
+def build_walls(case, spacing):
+    """Every tank, wall box and wall of any shape of the case, in that order: name ->
+    (position, kind, velocity, its walls.Side or None). A wall of any shape leaves out its points
+    within half a spacing of an earlier wall's particles (the earlier one stands there, a
+    wall particle if either was)."""
+    walls = {}
+    for section, builder in (("tank", tank), ("wall_box", wall_box)):
+        for k, spec in enumerate(case[section]):
+            name = f"{section}[{k}]"
+            walls[name] = (*builder(spec, spacing, name), None)
+    for k, spec in enumerate(case.get("wall", ())):
+        name = f"wall[{k}]"
+        label = f"{name} '{spec['name']}'" if spec["name"] else name
+        surface = surface_of(label, spec, domain_box(case))
+        position, kind, velocity, side = wall_particles(label, spec, surface,
+                                                        case["particles"]["origin"], spacing,
+                                                        domain_box(case))
+        if walls:
+            earlier = np.concatenate([w[0] for w in walls.values()])
+            distance, nearest = cKDTree(earlier).query(position, distance_upper_bound=
+                                                       0.5 * spacing)
+            taken = np.isfinite(distance)
+            if taken.any():
+                _promote(walls, nearest[taken & (kind == WALL)])
+                position, kind, velocity = position[~taken], kind[~taken], velocity[~taken]
+        walls[name] = (position, kind, velocity, side)
+    return walls
+
+
+def _promote(walls, indices):
+    """Make the earlier walls' particles ``indices`` (into their concatenation) walls."""
+    start = 0
+    for position, kind, _, _ in walls.values():
+        mine = indices[(indices >= start) & (indices < start + len(position))] - start
+        kind[mine] = WALL
+        start += len(position)
+
+
+# The water's first layer lies a whole spacing from a wall's first layer, as in a tank.
+CLEARANCE = 1.0 - 1e-6
+
+
+def clear_of_walls(position, walls, case, spacing, every_wall):
+    """``position`` less the points in a wall of any shape's material or closer than a
+    spacing to its particles (``every_wall``: to any wall's, tanks' and wall boxes' too)."""
+    keep = np.ones(len(position), bool)
+    near = [w[0] for w in walls.values() if every_wall or w[3] is not None]
+    for entry in walls.values():
+        if entry[3] is not None:
+            keep &= ~entry[3].material(position)
+    if near and len(position):
+        points = np.concatenate(near)
+        if len(points):
+            keep &= ~_too_close(position, points, case["particles"]["origin"], spacing)
+    return position[keep]
+
+
+def _too_close(position, points, origin, spacing):
+    """Which of ``position`` lie closer than CLEARANCE spacings to any of ``points``. Two
+    points of the lattice ``origin + (i + 1/2) l0`` are that close only when they are the
+    same point: those are matched by their indices (a k-d tree of the walls' points took a
+    second for a million fluid points); the others are searched in a k-d tree."""
+    def lattice_index(p):
+        index = (p - np.asarray(origin, float)) / spacing - 0.5
+        nearest = np.rint(index).astype(np.int64)
+        return nearest, np.all(np.abs(index - nearest) < 1e-6, axis=1)
+
+    (fluid, fluid_on), (wall, wall_on) = lattice_index(position), lattice_index(points)
+    close = np.zeros(len(position), bool)
+    if fluid_on.any() and wall_on.any():
+        low = np.minimum(fluid[fluid_on].min(axis=0), wall[wall_on].min(axis=0))
+        span = np.maximum(fluid[fluid_on].max(axis=0), wall[wall_on].max(axis=0)) - low + 1
+        keys = np.ravel_multi_index(tuple((wall[wall_on] - low).T), span)
+        close[fluid_on] = np.isin(np.ravel_multi_index(tuple((fluid[fluid_on] - low).T), span),
+                                  keys)
+    for mine, theirs in ((fluid_on, ~wall_on), (~fluid_on, np.ones(len(points), bool))):
+        if mine.any() and theirs.any():
+            distance, _ = cKDTree(points[theirs]).query(position[mine], distance_upper_bound=
+                                                        CLEARANCE * spacing)
+            close[mine] |= np.isfinite(distance)
+    return close
 
 
 def tank(spec, spacing, name):
@@ -92,9 +191,6 @@ def wall_box(spec, spacing, name):
     return position, kind, np.zeros((len(position), len(counts)))
 
 
-BUILDERS = {"fluid_block": fluid_block, "tank": tank, "wall_box": wall_box}
-
-
 def build(case, solids=None, open_boundaries=None):
     """All particles of the case, ids 0..N-1 in the order of the case's geometry entries.
 
@@ -117,15 +213,19 @@ def build(case, solids=None, open_boundaries=None):
         origin.append(np.full(len(position), len(sources), np.int32))
         sources.append(name)
 
-    for section, builder in BUILDERS.items():
-        for k, spec in enumerate(case[section]):
-            name = f"{section}[{k}]"
-            position, kind, velocity = builder(spec, spacing, name)
-            if section == "fluid_block" and solids is not None:
-                # A closed shell's nodes take the place of the water at its surface.
-                keep = ~solids.displaces(position, spacing)
-                position, kind, velocity = position[keep], kind[keep], velocity[keep]
-            add(name, position, kind, velocity)
+    # The walls first, since the water keeps clear of them; then numbered in the order
+    # of the sections, the fluid blocks first.
+    walls = build_walls(case, spacing)
+    for k, spec in enumerate(case["fluid_block"]):
+        name = f"fluid_block[{k}]"
+        position, kind, velocity = fluid_block(spec, spacing, name, case, walls)
+        if solids is not None:
+            # A closed shell's nodes take the place of the water at its surface.
+            keep = ~solids.displaces(position, spacing)
+            position, kind, velocity = position[keep], kind[keep], velocity[keep]
+        add(name, position, kind, velocity)
+    for name, (position, kind, velocity, _) in walls.items():
+        add(name, position, kind, velocity)
     if solids is not None:
         nodes = solids.node_particles()
         for k, body in enumerate(solids.bodies):

@@ -1,0 +1,56 @@
+"""Writes the test meshes of this directory with meshio (not parmps's generators), so
+that the walls and fluid from files are tested on files another tool wrote:
+
+- box.stl: the box [0, 0.2] x [0, 0.1] x [0, 0.1] m, 12 outward triangles (ASCII);
+- cylinder.stl: a cylinder of radius 0.05 m about the vertical line x = y = 0.1 m,
+  z in [0.05, 0.15] m, a 128-sided prism with fans on its ends (ASCII).
+
+Run it from anywhere: python tests/meshes/make_meshes.py
+"""
+
+import os
+
+import meshio
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+
+
+def box(lower, upper):
+    x = np.array([[lower[0], upper[0]][i & 1] for i in range(8)])
+    y = np.array([[lower[1], upper[1]][(i >> 1) & 1] for i in range(8)])
+    z = np.array([[lower[2], upper[2]][(i >> 2) & 1] for i in range(8)])
+    # Faces as outward quads (counter-clockwise seen from outside), two triangles each.
+    quads = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2),
+             (1, 3, 7, 5)]
+    triangles = [t for a, b, c, d in quads for t in ((a, b, c), (a, c, d))]
+    return np.column_stack([x, y, z]), np.array(triangles)
+
+
+def cylinder(center, radius, low, high, sides):
+    angle = 2 * np.pi * np.arange(sides) / sides
+    ring = np.column_stack([center[0] + radius * np.cos(angle),
+                            center[1] + radius * np.sin(angle)])
+    points = np.vstack([np.column_stack([ring, np.full(sides, low)]),
+                        np.column_stack([ring, np.full(sides, high)]),
+                        [[center[0], center[1], low], [center[0], center[1], high]]])
+    i = np.arange(sides)
+    j = (i + 1) % sides
+    bottom, top = 2 * sides, 2 * sides + 1
+    triangles = np.vstack([np.column_stack([i, j, j + sides]),
+                           np.column_stack([i, j + sides, i + sides]),
+                           np.column_stack([np.full(sides, bottom), j, i]),
+                           np.column_stack([np.full(sides, top), i + sides, j + sides])])
+    return points, triangles
+
+
+def main():
+    for name, (points, triangles) in {
+            "box.stl": box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1)),
+            "cylinder.stl": cylinder((0.1, 0.1), 0.05, 0.05, 0.15, 128)}.items():
+        meshio.write(os.path.join(HERE, name), meshio.Mesh(points, [("triangle", triangles)]),
+                     binary=False)
+
+
+if __name__ == "__main__":
+    main()
