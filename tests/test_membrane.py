@@ -221,8 +221,8 @@ def test_a_membrane_stretched_past_its_chains_stops_the_run_naming_body_node_and
 
 
 def test_the_icosahedral_cell_is_closed_and_the_octahedral_cells_shape():
-    from parmps.solids.mass_spring.shell import check_closed_surface, triangle_areas
-    from parmps.solids.mass_spring.surface import enclosed_volume
+    from parmps.geometry.mesh import check_closed_surface, triangle_areas
+    from parmps.geometry.mesh import enclosed_volume
     vertices, triangles = red_blood_cell(frequency=6, base="icosahedron")
     check_closed_surface("icosahedral cell", vertices, triangles)
     assert len(vertices) == 10 * 6 ** 2 + 2
