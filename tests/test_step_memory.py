@@ -84,9 +84,9 @@ def test_the_matrix_is_assembled_without_the_search_list_over_its_sub_list(monke
     assert len(seen["cols"]) < 0.7 * len(cols)
 
 
-def test_the_search_list_goes_without_the_shift_too(monkeypatch):
-    # The shift (the default) reads the wider sub-list; without it nothing else needs the list.
-    _, seen, _, _ = _one_step(monkeypatch, "hydrostatic.toml", ['mps.shifting="none"'])
+def test_the_search_list_goes_with_the_shift_too(monkeypatch):
+    # The shift reads the wider sub-list, cut at the predicted positions.
+    _, seen, _, _ = _one_step(monkeypatch, "hydrostatic.toml", ['mps.shifting="fickian"'])
     assert not seen["search_alive"]
 
 

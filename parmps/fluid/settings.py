@@ -29,10 +29,11 @@ def _mps_section():
         "free_surface": Key("str", "extrapolated", choices=tuple(SURFACES),
                             doc="where P = 0: \"extrapolated\" half a spacing beyond the "
                                 "free-surface particles, \"dirichlet\" on them"),
-        # Fickian shifting keeps a violent flow's energy falling: without it the 2D dam
-        # breaks gained energy past their first impact (docs/design.md §1.8).
-        "shifting": Key("str", "fickian", choices=tuple(SHIFTINGS),
-                        doc="particle shifting after the correction: \"fickian\" or \"none\" "
+        # Fickian shifting keeps the 2D dam breaks' energy falling past their first impact,
+        # but moves the Lobovsky plateau past its target: not the default yet
+        # (docs/design.md §1.8).
+        "shifting": Key("str", "none", choices=tuple(SHIFTINGS),
+                        doc="particle shifting after the correction: \"none\" or \"fickian\" "
                             "(settings in [mps.<name>])"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True,
