@@ -311,11 +311,8 @@ class WeakCoupling(Participant):
             particles.velocity[index] = velocity
         return self.comm.allreduce(len(index), op=MPI.SUM)
 
-    def mechanical_energy(self):
-        return self.model.mechanical_energy()
-
     def diagnostics(self):
-        return {"body_energy": self.mechanical_energy()}
+        return {"body_energy": self.model.mechanical_energy()}
 
     def node_substeps(self, dt):
         """Each rank's node-substeps in a step of dt: a body's nodes times its substeps, on

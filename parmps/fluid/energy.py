@@ -31,6 +31,12 @@ def fluid_energy(particles, mass, gravity, datum, mask=None):
                            mass, gravity, datum)
 
 
+def budget(row):
+    """What can only fall in a flow with fixed walls and no inflow: the fluid's and the
+    bodies' energy less the work the boundaries did, from a diagnostics row (or columns)."""
+    return row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+
+
 def energy_datum(particles, gravity, comm):
     """The owned fluid's lowest point along ``gravity`` over every rank (collective):
     the origin of the potential energy. The origin itself, 0, where there is no gravity

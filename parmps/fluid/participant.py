@@ -33,9 +33,8 @@ do about it, for messages: ``(description, advice)`` or None.
 [J] (a moving wall's force times its velocity), not reduced over the ranks; and
 ``exchanges_fluid``: True for a participant whose ``after_fluid`` adds fluid particles or
 takes them away (open boundaries), the energy they carry then counted by the stepper. The
-energy check of :mod:`parmps.fluid.energy` counts neither as a source. ``mechanical_energy()``: the
-energy the participant's own bodies hold (kinetic, elastic and potential, the same on
-every rank), which the fluid trades with them.
+energy check of :mod:`parmps.fluid.energy` counts neither as a source.
+A participant with bodies reports their energy as the ``body_energy`` diagnostic.
 ``node_substeps(dt)``: the bodies' node-substeps each rank will run in a step of
 dt (an array over the ranks, the same on every rank), or None: work beyond the
 rank's particles, which the decomposition's balance counts
@@ -90,7 +89,4 @@ class Participant:
         return None
 
     def work(self):
-        return 0.0
-
-    def mechanical_energy(self):
         return 0.0

@@ -18,6 +18,7 @@ import logging
 import numpy as np
 
 from parmps.core.particles import FLUID
+from parmps.fluid import energy
 from parmps.io.series import Series
 from parmps.run.schedule import SimulatedInterval, WallInterval
 
@@ -192,7 +193,7 @@ class EnergyWatch(Observer):
         row = state.diagnostics
         if "fluid_energy" not in row:
             return
-        budget = row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+        budget = energy.budget(row)
         if self.initial is None:
             self.initial, self.last = row["fluid_energy"], budget
         if not self.cadence.due(state.time):

@@ -257,13 +257,13 @@ class FluidStepper:
                   "imbalance": self.step_imbalance}
         for participant in self.participants:
             values.update(participant.diagnostics())
-        self._follow_budget(values["fluid_energy"], work)
+        self._follow_budget(values)
         return values
 
-    def _follow_budget(self, fluid_energy, work):
-        budget = fluid_energy + sum(p.mechanical_energy() for p in self.participants) - work
+    def _follow_budget(self, values):
+        budget = energy.budget(values)
         if self.initial_energy is None:
-            self.initial_energy, self.lowest_budget = fluid_energy, budget
+            self.initial_energy, self.lowest_budget = values["fluid_energy"], budget
         self.budget = budget
         self.lowest_budget = min(self.lowest_budget, budget)
 

@@ -120,15 +120,14 @@ def long_run_energy(path, case, report_at=(5.0, 10.0, 15.0, 20.0)):
     largest 99.9th percentile of a frame, and ``speed_max``, the largest speed; ``removed``,
     the fluid removed outside the domain over the fluid at t = 0; ``end`` in t sqrt(g/H).
     """
+    from parmps.fluid import energy
     from parmps.result import open_result
     scale = column_time_scale(case)
     lower, upper = fluid_extent(case)
     front_speed = 2.0 * math.sqrt(gravity(case) * (upper[1] - lower[1]))
     with open_result(path) as result:
         d = result.diagnostics
-        budget = d["fluid_energy"] - d["boundary_work"]
-        if "body_energy" in d:
-            budget = budget + d["body_energy"]
+        budget = energy.budget(d)
         steps = d["step"]
         p999, largest, frame_steps = [], [], []
         for frame in result.frames:
