@@ -1040,14 +1040,31 @@ def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, co
 @numba.njit(cache=True)
 def poisson_rows_room(indptr, cols, row_number):
     """Entries each block of :func:`poisson_rows_into` (split) can hold at most: this
-    rank's, every pair with an owned particle and a diagonal a row; the other ranks', every
-    pair with a ghost."""
+    rank's, every pair with a particle of this rank's rows and a diagonal a row; the other
+    ranks', every other pair. A ghost may carry one of this rank's rows: a periodic image
+    of an owned particle."""
     n_owned = indptr.shape[0] - 1
-    to_ghosts = 0
+    first, last = _owned_row_range(row_number, n_owned)
+    to_others = 0
     for p in range(indptr[n_owned]):
-        if cols[p] >= n_owned:
-            to_ghosts += 1
-    return indptr[n_owned] - to_ghosts + _pressure_rows(row_number, n_owned), to_ghosts
+        j = cols[p]
+        if j >= n_owned and (row_number[j] < first or row_number[j] > last):
+            to_others += 1
+    return indptr[n_owned] - to_others + _pressure_rows(row_number, n_owned), to_others
+
+
+@numba.njit(cache=True)
+def _owned_row_range(row_number, n_owned):
+    """The smallest and the largest row number of the owned particles (0, -1 if none)."""
+    first, last = 0, -1
+    for i in range(n_owned):
+        r = row_number[i]
+        if r >= 0:
+            if last < first:
+                first, last = r, r
+            else:
+                first, last = min(first, r), max(last, r)
+    return first, last
 
 
 @numba.njit(cache=True)

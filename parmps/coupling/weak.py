@@ -250,7 +250,8 @@ class WeakCoupling(Participant):
         comm = self.comm
         model = self.model
         # The fluid step leaves ghost values of the start of the step.
-        decomposition.refresh([particles.position, particles.velocity, particles.pressure])
+        decomposition.refresh([particles.position, particles.velocity, particles.pressure],
+                              positions=(0,))
         n = particles.n_owned
         rows = np.flatnonzero(particles.kind[:n] == SOLID)
         force = self.node_forces(particles, rows, dt)

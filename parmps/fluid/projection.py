@@ -250,7 +250,7 @@ class FluidSolver:
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
-        self.decomposition.refresh([position_star, velocity_star])
+        self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         if self.collision:
             timers.start("operators")
             change = kernels.collision_change(s.indptr, s.cols, position_star, velocity_star,
@@ -260,7 +260,7 @@ class FluidSolver:
             velocity_star[:n] += change
             position_star[:n] += dt * change
             timers.start("halo")
-            self.decomposition.refresh([position_star, velocity_star])
+            self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         s.position_star, s.velocity_star = position_star, velocity_star
 
     def _number_density(self, s):
@@ -443,7 +443,7 @@ class FluidSolver:
         on_surface = np.zeros(len(particles), np.int8)
         on_surface[:n] = surface & fluid[:n]
         timers.start("halo")
-        self.decomposition.refresh([position, on_surface])
+        self.decomposition.refresh([position, on_surface], positions=(0,))
         timers.start("operators")
         shift = self.shifting.shift(indptr, cols, position, velocity, on_surface.view(bool),
                                     fluid[:n], dt, n)
