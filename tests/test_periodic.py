@@ -1,0 +1,163 @@
+"""Periodic boundaries (``domain.periodic``): the domain's wrap and minimum image, the periodic
+images, a tank that continues through the seam, bad input, and a channel whose water
+crosses the seam giving the same answer on 1, 2 and 3 ranks, with slabs and with blocks.
+
+Tolerances:
+- wrap, minimum image, images: exact (a shift by one period; round-off of one addition);
+- the channel on 2 and 3 ranks, slabs and blocks (a 1 x 2 grid: each rank its own neighbour
+  along x): positions by id within 1e-9 of the domain's size of one rank's, with
+  ``-pressure_ksp_rtol 1e-12``, as tests/test_parallel.py (measured: 2e-17 m);
+- a restart across the seam on another rank count: the same, against the run not stopped;
+- energy: the body force along x does work W; the fluid's energy less W only falls
+  (within 1e-9 of E0: the trapezoidal rule's error on a smooth flow).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import case_of, error_lines, run_parmps
+from parmps.core.particles import FLUID
+from parmps.geometry import scene
+from parmps.geometry.domain import Domain
+from parmps.io.frames import read_frames
+from parmps.parallel.periodic import PeriodicImages
+
+CHANNEL = Path(__file__).parent / "cases" / "periodic_channel.toml"
+TIGHT = ["-pressure_ksp_rtol", "1e-12"]
+
+
+class _OneRank:
+    size = 1
+    rank = 0
+
+
+def test_wrap_moves_only_what_is_past_the_margin():
+    domain = Domain([0.0, 0.0], [1.0, 2.0], periodic=[0])
+    position = np.array([[1.05, 0.5], [1.2, 0.5], [-0.3, 3.0], [0.5, -1.0]])
+    assert domain.wrap(position, beyond=0.1) == 2
+    np.testing.assert_allclose(position, [[1.05, 0.5], [0.2, 0.5], [0.7, 3.0], [0.5, -1.0]])
+    np.testing.assert_allclose(domain.wrapped([[1.05, 0.5]]), [[0.05, 0.5]])
+    # y is not periodic: out of the box along it, nothing along x.
+    np.testing.assert_array_equal(domain.outside(position), [False, False, True, True])
+
+
+def test_minimum_image_brings_each_periodic_component_within_half_a_period():
+    domain = Domain([0.0, 0.0, 0.0], [1.0, 2.0, 3.0], periodic=[0, 2])
+    delta = domain.minimum_image([[0.9, 1.9, -2.9], [-0.4, 0.0, 1.4]])
+    np.testing.assert_allclose(delta, [[-0.1, 1.9, 0.1], [-0.4, 0.0, 1.4]])
+
+
+def test_images_of_a_corner_particle_cover_both_faces_and_the_corner():
+    domain = Domain([0.0, 0.0], [1.0, 1.0], periodic=[0, 1])
+    images = PeriodicImages(_OneRank(), domain, halo_width=0.1)
+    index, shift = images.candidates(np.array([[0.05, 0.95], [0.5, 0.5]]))
+    assert set(index) == {0}
+    assert sorted(map(tuple, shift)) == [(0.0, -1.0), (1.0, -1.0), (1.0, 0.0)]
+
+
+def test_a_tank_spanning_the_period_has_no_walls_across_it():
+    case = case_of(CHANNEL)
+    particles, _, _ = scene.build(case)
+    walls = particles.kind != FLUID
+    x = particles.position[walls, 0]
+    # Floor and roof only, on the fluid's lattice columns: nothing beyond the faces.
+    assert x.min() == pytest.approx(0.0005) and x.max() == pytest.approx(0.0395)
+    assert len(np.unique(np.round(x, 9))) == 40
+
+
+@pytest.mark.parametrize("override, message", [
+    ('domain.periodic=["x", "x"]', "domain.periodic names 'x' twice"),
+    ('domain.periodic=["z"]', "domain.periodic[0] names axis 'z', which a 2D case does not have"),
+    ('domain.periodic=["q"]', "domain.periodic[0] must be one of 'x', 'y', 'z', got 'q'"),
+    ("domain.upper=[0.0405, 0.025]", "is 40.5 spacings; it must be a whole number"),
+])
+def test_bad_periodic_input_gets_one_line(tmp_path, override, message):
+    result = run_parmps([CHANNEL, "-o", tmp_path / "out", "--set", override], timeout=60)
+    _assert_one_line(result, message)
+
+
+def test_a_period_within_the_halo_is_refused(tmp_path):
+    path = tmp_path / "short.toml"
+    text = CHANNEL.read_text().split("[[probe]]")[0]
+    path.write_text(text.replace("0.04", "0.007"))
+    result = run_parmps([path, "-o", tmp_path / "out"], timeout=60)
+    _assert_one_line(result, "the period along x (0.007 m) must exceed twice the halo width")
+
+
+def _assert_one_line(result, message):
+    assert result.returncode == 2, result.stderr
+    lines = error_lines(result.stderr)
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+
+
+@pytest.fixture(scope="module")
+def one_rank_channel(tmp_path_factory):
+    out = tmp_path_factory.mktemp("channel1")
+    result = run_parmps([CHANNEL, "-o", out] + TIGHT, timeout=120)
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def test_the_water_goes_through_the_seam(one_rank_channel):
+    frames = read_frames(one_rank_channel / "result.h5")
+    first, last = frames[0], frames[-1]
+    fluid = first["kind"] == FLUID
+    x0, x1 = first["position"][fluid, 0], last["position"][fluid, 0]
+    # Everything stays inside the period; the water moved about 0.2 m/s x 0.05 s = 1 cm
+    # (less near the walls), so the particles near the seam went through it.
+    assert x1.min() >= 0.0 and x1.max() < 0.04
+    went_through = np.count_nonzero(x1 < x0 - 0.02)
+    assert went_through > 100, went_through
+    assert not np.any(last["position"][fluid, 1] < 0.0) and \
+        not np.any(last["position"][fluid, 1] > 0.02)
+
+
+def test_the_energy_less_the_body_force_work_only_falls(one_rank_channel):
+    from parmps.result import open_result
+    with open_result(one_rank_channel) as result:
+        rows = result.diagnostics
+        budget = rows["fluid_energy"] - rows["boundary_work"]
+        work = rows["boundary_work"]
+    assert work[-1] > 0.0  # the body force pushes the water along x
+    rises = np.diff(budget)
+    assert rises.max() < 1e-9 * abs(budget[0]), rises.max()
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks, settings", [
+    (2, []), (3, []),
+    (2, ['parallel.decomposition="blocks"', "parallel.grid=[1, 2]"]),
+    (2, ['parallel.decomposition="blocks"', "parallel.grid=[2, 1]"]),
+])
+def test_the_channel_on_several_ranks_matches_one_rank(one_rank_channel, tmp_path, ranks,
+                                                        settings):
+    sets = [a for s in settings for a in ("--set", s)]
+    result = run_parmps([CHANNEL, "-o", tmp_path] + TIGHT + sets, ranks=ranks, timeout=120)
+    assert result.returncode == 0, result.stderr
+    _assert_same_by_id(one_rank_channel, tmp_path)
+
+
+def _assert_same_by_id(expected, got):
+    for one, many in zip(read_frames(expected / "result.h5"), read_frames(got / "result.h5"),
+                         strict=True):
+        np.testing.assert_array_equal(many["id"], one["id"])
+        error = np.abs(many["position"] - one["position"]).max()
+        assert error < 1e-9 * 0.04, (one["time"], error)
+
+
+@pytest.mark.mpi
+def test_a_restart_across_the_seam_on_another_rank_count(one_rank_channel, tmp_path):
+    first = run_parmps([CHANNEL, "-o", tmp_path, "--end-time", "0.03"] + TIGHT, ranks=2,
+                       timeout=120)
+    assert first.returncode == 0, first.stderr
+    again = run_parmps(["--restart", tmp_path, "--end-time", "0.05"] + TIGHT, ranks=3,
+                       timeout=120)
+    assert again.returncode == 0, again.stderr
+    one = read_frames(one_rank_channel / "result.h5")[-1]
+    last = read_frames(tmp_path / "result.h5")[-1]
+    assert last["time"] == pytest.approx(one["time"])
+    np.testing.assert_array_equal(last["id"], one["id"])
+    assert np.abs(last["position"] - one["position"]).max() < 1e-9 * 0.04
