@@ -268,6 +268,42 @@ def vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows=Non
     return _vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, d):
+    out = velocity[:n_rows].copy()
+    for i in range(n_rows):
+        if is_fluid[i]:
+            continue
+        total = 0.0
+        mean = np.zeros(d)
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not is_fluid[j]:
+                continue
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w > 0.0:
+                total += w
+                for k in range(d):
+                    mean[k] += w * velocity[j, k]
+        if total > 0.0:
+            for k in range(d):
+                out[i, k] = 2.0 * velocity[i, k] - mean[k] / total
+    return out
+
+
+@numba.njit(cache=True)
+def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+    """The velocity the viscous term sees at the rows ``n_rows``: a fluid particle's own; a
+    wall's, dummy's or body node's ``2 u_i - <u>_i``, ``<u>_i`` the mean of its fluid
+    neighbours' velocities weighted by w(r) (its own where it has none), so that the
+    velocity extrapolated across the wall's surface meets the wall's there (Adami, Hu &
+    Adams 2012's no-slip wall)."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 2)
+    return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
+
+
 # --- divergence -------------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

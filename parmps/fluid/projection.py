@@ -246,7 +246,8 @@ class FluidSolver:
         if c.viscosity > 0.0:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(s.indptr, s.cols, particles.position,
-                                             particles.velocity, c.re_laplacian, n, moving)
+                                             self._wall_velocity(s), c.re_laplacian, n,
+                                             moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
@@ -262,6 +263,20 @@ class FluidSolver:
             timers.start("halo")
             self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         s.position_star, s.velocity_star = position_star, velocity_star
+
+    def _wall_velocity(self, s):
+        """Every local particle's velocity as the viscous term sees it: the walls', dummies'
+        and nodes' extrapolated so the fluid's velocity meets theirs at the wall's surface
+        (no slip), ghosts refreshed."""
+        particles, c = s.particles, self.constants
+        velocity = np.empty_like(particles.velocity)
+        velocity[:s.n] = kernels.no_slip_velocity(
+            s.indptr, s.cols, particles.position, particles.velocity, c.re_laplacian, s.n,
+            self.moving(particles.kind))
+        self.timers.start("halo")
+        self.decomposition.refresh([velocity])
+        self.timers.start("operators")
+        return velocity
 
     def _number_density(self, s):
         """n* at the predicted positions and the free surface it marks."""

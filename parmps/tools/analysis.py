@@ -1058,3 +1058,51 @@ def cell_stretch(path, case, reference, body="cell", drift_window=5.0e-4):
             "area_error": float(np.abs(series["area_error"]).max()),
             "volume_error": float(np.abs(series["volume_error"]).max()),
             "wall": float(wall[-1])}
+
+
+# --------------------------------------------------------------------------
+# Plane Poiseuille flow: a periodic channel driven by a body force
+
+def poiseuille_series(y, time, gravity, viscosity, height, terms=200):
+    """The start-up of plane Poiseuille flow from rest between no-slip walls at y = 0 and
+    ``height``, driven by the body force ``gravity`` along the channel: u(y, t) [m/s]."""
+    y = np.asarray(y, dtype=float)
+    steady = gravity * y * (height - y) / (2.0 * viscosity)
+    n = np.arange(1, 2 * terms, 2)[:, None]
+    decay = np.exp(-(n * np.pi) ** 2 * viscosity * time / height ** 2)
+    modes = 4.0 * gravity * height ** 2 / (viscosity * np.pi ** 3 * n ** 3) * \
+        np.sin(n * np.pi * y[None, :] / height) * decay
+    return steady - modes.sum(axis=0)
+
+
+def poiseuille_profile(path, case):
+    """A periodic channel's velocity against :func:`poiseuille_series`, relative to the
+    steady centre-line velocity u_max = g H^2 / (8 nu): ``profile_rms`` (the RMS over the
+    fluid at the last frame), ``transient_rms`` (the largest RMS over the frames) and
+    ``flow_rate`` (the fluid's volume flux over the period against g H^3 / (12 nu), minus
+    one, at the last frame). The walls are the first tank's floor and roof; the body force
+    is gravity's component along the first periodic axis."""
+    from parmps.result import open_result
+    axis = "xyz".index(case["domain"]["periodic"][0])
+    g, nu = case["physics"]["gravity"][axis], case["fluid"]["viscosity"]
+    tank = case["tank"][0]
+    across = len(tank["lower"]) - 1
+    floor, height = tank["lower"][across], tank["upper"][across] - tank["lower"][across]
+    period = case["domain"]["upper"][axis] - case["domain"]["lower"][axis]
+    volume = case["particles"]["spacing"] ** len(tank["lower"])
+    u_max = g * height ** 2 / (8.0 * nu)
+    errors = []
+    with open_result(path) as result:
+        for frame in result.frames[1:]:
+            fluid = frame.kind == 0
+            y = frame.position[fluid, across] - floor
+            u = frame.velocity[fluid, axis]
+            errors.append(float(np.sqrt(np.mean((u - poiseuille_series(
+                y, frame.time, g, nu, height)) ** 2)) / u_max))
+        flux = float(u.sum() * volume / period)
+        if across == 2:  # 3D: per metre of depth across the flow
+            flux /= case["domain"]["upper"][1] - case["domain"]["lower"][1]
+    steady_flux = g * height ** 3 / (12.0 * nu)
+    return {"profile_rms": errors[-1], "transient_rms": max(errors),
+            "flow_rate": flux / steady_flux - 1.0, "u_max": u_max,
+            "end": float(frame.time)}
