@@ -173,3 +173,50 @@ def test_plane_poiseuille_flow_meets_its_targets_at_the_defaults(tmp_path):
     verdicts = check.verdicts(check.measure(tmp_path / "result.h5"))
     assert set(verdicts) == {"profile_rms", "transient_rms", "flow_rate"}
     assert all(v["pass"] for v in verdicts.values()), verdicts
+
+
+CAPSULE = Path(__file__).parents[1] / "cases" / "capsule_periodic_3d.toml"
+# A tenth of the case's 0.5 s: the capsule lies across the seam from the first step, which is
+# what is tested here; `python -m parmps validate capsule_periodic_3d` runs it to its end.
+CAPSULE_END = ["--end-time", "0.05"]
+
+
+@pytest.fixture(scope="module")
+def one_rank_capsule(tmp_path_factory):
+    out = tmp_path_factory.mktemp("capsule1")
+    result = run_parmps([CAPSULE, "-o", out] + CAPSULE_END + TIGHT, timeout=300)
+    assert result.returncode == 0, result.stderr
+    return out
+
+
+def test_a_capsule_across_the_seam_keeps_its_volume_and_its_water(one_rank_capsule):
+    from parmps import validation
+    check = validation.load("capsule_periodic_3d")
+    measured = check.measure(one_rank_capsule / "result.h5")
+    assert measured["volume_error"] < 1e-8
+    assert measured["fluid_inside"] == 144 and measured["fluid_inside_change"] == 0
+    assert measured["crossings"] == 0
+    # Its nodes span the seam: the body keeps them unwrapped, its node particles are wrapped
+    # into the period.
+    from parmps.core.particles import SOLID
+    from parmps.result import open_result
+    with open_result(one_rank_capsule) as result:
+        frame = result.frames[-1]
+        nodes = np.asarray(frame.bodies["capsule"]["position"])
+        particles = frame.field("position")[frame.field("kind") == SOLID]
+    assert nodes[:, 0].min() < 0.0 < nodes[:, 0].max()
+    assert particles[:, 0].min() >= 0.0 and particles[:, 0].max() < 0.2
+    assert particles[:, 0].min() < 0.01 and particles[:, 0].max() > 0.19
+
+
+@pytest.mark.mpi
+@pytest.mark.parametrize("ranks", [2, 3])
+def test_the_capsule_across_the_seam_on_several_ranks_matches_one_rank(one_rank_capsule,
+                                                                        tmp_path, ranks):
+    result = run_parmps([CAPSULE, "-o", tmp_path] + CAPSULE_END + TIGHT, ranks=ranks,
+                        timeout=300)
+    assert result.returncode == 0, result.stderr
+    for one, many in zip(read_frames(one_rank_capsule / "result.h5"),
+                         read_frames(tmp_path / "result.h5"), strict=True):
+        np.testing.assert_array_equal(many["id"], one["id"])
+        assert np.abs(many["position"] - one["position"]).max() < 1e-9 * 0.2

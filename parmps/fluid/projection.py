@@ -18,6 +18,7 @@ from parmps.core.neighbours import pair_list, rows_near
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
+from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
                                   scheme_class)
 
@@ -170,6 +171,8 @@ class FluidSolver:
         self.shifting = scheme_class(SHIFTINGS, mps["shifting"])(mps[mps["shifting"]],
                                                                  constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
+        # The domain (its periodic axes), for those that measure across a seam.
+        self.domain = Domain.from_case(case)
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
         self.compressibility = mps["compressibility"]

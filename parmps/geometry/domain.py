@@ -72,6 +72,12 @@ class Domain:
             delta[..., axis] -= period * np.round(delta[..., axis] / period)
         return delta
 
+    def near(self, position, reference):
+        """``position`` ((n, d)) with each row taken at its image nearest ``reference`` ((d,))
+        along the periodic axes (a new array; the rows as they are if none is periodic)."""
+        reference = np.asarray(reference, dtype=np.float64)
+        return reference + self.minimum_image(np.asarray(position) - reference)
+
     def outside(self, position):
         """Which rows of ``position`` lie outside the box along an axis that is not periodic
         (a periodic axis has no outside)."""

@@ -264,7 +264,7 @@ def build(case, solids=None, open_boundaries=None):
         position, kind, velocity = fluid_block(spec, spacing, name, case, walls)
         if solids is not None:
             # A closed shell's nodes take the place of the water at its surface.
-            keep = ~solids.displaces(position, spacing)
+            keep = ~solids.displaces(position, spacing, Domain.from_case(case))
             position, kind, velocity = position[keep], kind[keep], velocity[keep]
         add(name, position, kind, velocity)
     for name, (position, kind, velocity, _) in walls.items():
@@ -293,6 +293,8 @@ def build(case, solids=None, open_boundaries=None):
         "node": np.concatenate(node_index),
     })
     origin = np.concatenate(origin)
+    # A body given across a periodic seam: its node particles inside the period.
+    particles.position[:] = Domain.from_case(case).wrapped(particles.position)
     check_inside_domain(case, particles, origin, sources)
     check_overlaps(particles, origin, sources, spacing)
     return particles, origin, sources

@@ -611,10 +611,10 @@ def curve_errors(time, value, t_ref, v_ref):
 
 
 def carried_body(path, case, body="box", check=None):
-    """A body carried by an inflow (validation/box_in_flow_3d/, capsule_3d/), in any
-    dimension: its largest |V - V0|/V0, the most fluid particles inside it at any step and
+    """A body carried by an inflow or a periodic duct's body force (validation/box_in_flow_3d/,
+    capsule_3d/, capsule_periodic_3d/), in any dimension: its largest |V - V0|/V0, the most fluid particles inside it at any step and
     how much that count changed (a shell holds its water: any change is a leak), how far its
-    centroid travelled along the first inlet's velocity (the flow's direction) by the last
+    centroid travelled along the first inlet's velocity (or the body force: the flow's direction) by the last
     step and across it, how far the run got and, with ``check`` (a body_crossing check's
     name), the fluid particles that crossed the body.
 
@@ -624,7 +624,9 @@ def carried_body(path, case, body="box", check=None):
     """
     series = solid_series(path, body)
     centroid = np.asarray(series["centroid"])
-    flow = np.asarray(case["inlet"][0]["velocity"], dtype=float)
+    # The flow's direction: the first inlet's, or in a periodic duct the driving body force's.
+    flow = np.asarray(case["inlet"][0]["velocity"] if case["inlet"]
+                      else case["physics"]["gravity"], dtype=float)
     flow /= np.linalg.norm(flow)
     travel = centroid[-1] - centroid[0]
     along = float(travel @ flow)
