@@ -78,6 +78,18 @@ def test_bad_periodic_input_gets_one_line(tmp_path, override, message):
     _assert_one_line(result, message)
 
 
+@pytest.mark.parametrize("section, message", [
+    ('[[outlet]]\nside = "left"\n', "outlet[0].side 'left' is a face of the periodic axis 'x'"),
+    ('[[inlet]]\nlower = [0.0, 0.0]\nupper = [0.004, 0.02]\nvelocity = [0.1, 0.0]\n',
+     "inlet[0].velocity runs along the periodic axis 'x'"),
+])
+def test_an_open_side_along_a_periodic_axis_is_refused(tmp_path, section, message):
+    path = tmp_path / "open.toml"
+    path.write_text(CHANNEL.read_text() + "\n" + section)
+    result = run_parmps([path, "-o", tmp_path / "out"], timeout=60)
+    _assert_one_line(result, message)
+
+
 def test_a_period_within_the_halo_is_refused(tmp_path):
     path = tmp_path / "short.toml"
     text = CHANNEL.read_text().split("[[probe]]")[0]
