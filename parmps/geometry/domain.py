@@ -63,6 +63,25 @@ class Domain:
                                                           self.period[axis])
         return position
 
+    def images(self, position, width):
+        """(index, shift) of the periodic images of the rows of ``position`` within ``width``
+        of a periodic face: the shift that carries each beyond the opposite face, and the
+        combinations of such shifts at corners (``position[index] + shift`` are the
+        images)."""
+        index = np.arange(len(position), dtype=np.int64)
+        shift = np.zeros((len(position), self.dimension))
+        for axis in self.periodic:
+            coordinate = position[index, axis]
+            low = np.flatnonzero(coordinate < self.lower[axis] + width)
+            high = np.flatnonzero(coordinate >= self.upper[axis] - width)
+            new_shift = np.concatenate([shift[low], shift[high]])
+            new_shift[:len(low), axis] += self.period[axis]
+            new_shift[len(low):, axis] -= self.period[axis]
+            index = np.concatenate([index, index[low], index[high]])
+            shift = np.concatenate([shift, new_shift])
+        moved = np.any(shift != 0.0, axis=1)
+        return index[moved], shift[moved]
+
     def minimum_image(self, delta):
         """``delta`` (differences of positions, (..., d)) with each periodic component
         brought within half a period of zero (a new array)."""

@@ -39,24 +39,9 @@ class PeriodicImages:
         self._recv_counts = np.zeros(self.comm.size, np.int64)
 
     def candidates(self, position):
-        """(index, shift) of every image of the rows of ``position``: a row within the
-        halo width of a periodic face gets the shift that carries it beyond the opposite
-        face, and the combinations of such shifts at corners."""
-        domain, h = self.domain, self.halo_width
-        index = np.arange(len(position), dtype=np.int64)
-        shift = np.zeros((len(position), domain.dimension))
-        for axis in domain.periodic:
-            coordinate = position[index, axis]
-            period = domain.period[axis]
-            low = np.flatnonzero(coordinate < domain.lower[axis] + h)
-            high = np.flatnonzero(coordinate >= domain.upper[axis] - h)
-            new_shift = np.concatenate([shift[low], shift[high]])
-            new_shift[:len(low), axis] += period
-            new_shift[len(low):, axis] -= period
-            index = np.concatenate([index, index[low], index[high]])
-            shift = np.concatenate([shift, new_shift])
-        moved = np.any(shift != 0.0, axis=1)
-        return index[moved], shift[moved]
+        """(index, shift) of every image of the rows of ``position``
+        (:meth:`parmps.geometry.domain.Domain.images` within the halo width)."""
+        return self.domain.images(position, self.halo_width)
 
     def destinations(self, image_position, boxes):
         """(image rows, rank) of every image within the halo width of a rank's region;

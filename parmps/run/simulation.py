@@ -164,7 +164,7 @@ class Simulation:
                                 self.model, interval, self.end_time, case["body"],
                                 case["dimension"],
                                 [(box["lower"], box["upper"]) for box in case["wall_box"]],
-                                probed_walls(case)))
+                                probed_walls(case), Domain.from_case(case)))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)
