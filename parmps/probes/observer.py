@@ -46,7 +46,8 @@ class Probe:
         self.kind = spec["kind"]
         self.spec = spec
         self.dimension = dimension
-        self.radius = spec["radius"] * spacing
+        # A solid-only case has no spacing: its probes read nodes only.
+        self.radius = spec["radius"] * spacing if spacing is not None else 0.0
         self.full_sum = lattice_sum(spec["radius"], dimension)
         # The depth integrates the fill: its mean over the water must be 1, not its peak.
         self.mean_sum = mean_sum(spec["radius"], dimension)
