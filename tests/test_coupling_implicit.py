@@ -18,6 +18,7 @@ from mpi4py import MPI
 
 from conftest import case_of, error_lines, run_parmps
 from parmps import open_result
+from parmps.geometry.domain import Domain
 from parmps.core.particles import FLUID, SOLID, Particles
 from parmps.coupling.implicit_pressure import ImplicitPressureCoupling
 from parmps.coupling.weak import WeakCoupling
@@ -38,7 +39,8 @@ def coupling_of(case, scheme=ImplicitPressureCoupling):
     constants = MPSConstants.from_case(case)
     gradient = scheme_class(GRADIENTS, case["mps"]["gradient"])(
         case["mps"][case["mps"]["gradient"]], constants)
-    fluid = SimpleNamespace(constants=constants, gradient=gradient)
+    fluid = SimpleNamespace(constants=constants, gradient=gradient,
+                            domain=Domain.from_case(case))
     return scheme(MassSpringModel.from_case(case), MPI.COMM_SELF, fluid)
 
 
