@@ -1194,3 +1194,24 @@ def flag_oscillation(path, case, probe="A", start=0.0, reference=None):
     for name, expected in (reference or {}).items():
         measured[f"{name}_error"] = measured[name] / expected - 1.0
     return measured
+
+
+# --------------------------------------------------------------------------
+# A wall of any shape in a violent flow: the wall_crossing check's record
+
+def wall_crossings(path, case, check):
+    """A ``wall_crossing`` check's record (validation/dam_break_cylinder/): ``crossings``, the
+    fluid particles that went through the wall's surface (deeper than half a spacing) over
+    the run; ``deepest``, the deepest any fluid particle sat in its material [spacings];
+    ``removed``, the fluid removed outside the domain over the fluid at t = 0; ``end`` [s]."""
+    from parmps.result import open_result
+    with open_result(path) as result:
+        record = result.checks[check]
+        total = np.asarray(record["total"])
+        deepest = np.asarray(record["deepest"])
+        d = result.diagnostics
+        return {"crossings": int(total[-1]) if len(total) else 0,
+                "deepest": float(np.nanmax(deepest) / case["particles"]["spacing"])
+                if len(deepest) and np.any(np.isfinite(deepest)) else float("-inf"),
+                "removed": float(d["n_escaped"][-1] / (d["n_fluid"][0] + d["n_escaped"][0])),
+                "end": float(d["time"][-1])}
