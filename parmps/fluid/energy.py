@@ -33,8 +33,10 @@ def fluid_energy(particles, mass, gravity, datum, mask=None):
 
 def budget(row):
     """What can only fall in a flow with fixed walls and no inflow: the fluid's and the
-    bodies' energy less the work the boundaries did, from a diagnostics row (or columns)."""
-    return row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+    bodies' energy less the work the boundaries and a time-varying body force did, from a
+    diagnostics row (or columns)."""
+    return (row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+            - row.get("body_force_work", 0.0))
 
 
 def energy_datum(particles, gravity, comm):
