@@ -1,18 +1,22 @@
 """Open boundaries: inflow buffer zones and outlets (docs/design.md §1.7, kind 4).
 
-Inlet. A box of ``m`` lattice columns (cross-sections of the flow: lines in
-2D, rectangles in 3D) of inflow-buffer particles that move rigidly at the
-uniform velocity U0 (along one axis). Column
-``c`` of inlet ``j`` sits at the distance ``s_c(t) = (m - c - 1/2) l0 + |U0| t``
-downstream of the upstream face: columns 0..m-1 fill the buffer at t = 0, and
-column ``c >= m`` enters at the upstream face once ``s_c(t) >= 0``. Particle
-``k`` of column ``c`` has the global id ``base_j + c * count + k``, with
-``base_j = N_scene + j * 2**40`` and ``count`` the particles per column, so ids
-depend on the case and the time alone, never on the rank count; every rank
-computes the new column and keeps the particles its slab owns. Buffer
-particles take part in the fluid step like fluid (number density, pressure
-unknowns, neighbours of the fluid) but their positions and velocities are reset
-to the prescribed motion after it; a particle whose ``s`` passes the buffer's
+Inlet. A box of ``m`` lattice columns along the flow (one axis) of inflow-buffer
+particles over ``count`` lanes, the lattice points across the flow (a line in 2D, a
+rectangle or the points inside a circle in 3D). Lane ``k`` moves at ``shape_k U(t)``:
+``U(t)`` the mean velocity (constant, ramped or tabulated, parmps.core.timeseries),
+``shape_k`` the profile across the opening (uniform or the fully developed laminar one,
+parmps.boundaries.profiles) scaled so that ``l0^(d-1) sum_k shape_k`` is the opening's
+area, so that the delivered flow rate is exactly the mean times the area. Particle
+``(c, k)`` of inlet ``j`` sits at the distance
+``s_ck(t) = (m - c - 1/2) l0 + shape_k S(t)`` downstream of the upstream face, with
+``S(t)`` the exact integral of U from 0: columns 0..m-1 fill the buffer at t = 0, and
+column ``c >= m`` of lane ``k`` enters at the upstream face once ``s_ck(t) >= 0``, each
+lane on its own. Its global id is ``base_j + c * count + k``, with
+``base_j = N_scene + j * 2**40``, so ids depend on the case and the time alone, never on
+the rank count or the step sizes; every rank computes the entering particles and keeps
+those its slab owns. Buffer particles take part in the fluid step like fluid (number
+density, pressure unknowns, neighbours of the fluid) but their positions and velocities
+are reset to the prescribed motion after it; a particle whose ``s`` passes the buffer's
 depth becomes fluid.
 
 Outlet. A side of the domain through which fluid leaves: particles beyond
