@@ -5,7 +5,10 @@ plus potential, the bodies' kinetic and elastic energy included): a rise that no
 outlet or moving wall paid for is a numerical source. Each fluid particle stands for the
 mass ``rho l0^d``; the potential energy is measured from a datum, the point of the initial
 fluid lowest along gravity, so a still column's energy is its own and a 1 % rise means 1 %
-of what the flow has to spend.
+of what the flow has to spend. With a body force that varies in time the potential energy
+is measured with the field of the moment, ``-sum m g(t).(x - datum)``: it then changes at
+fixed positions too, and that change, the field's work, is the ``body_force_work`` the budget
+subtracts (the datum stays the one taken along g(0)).
 """
 
 import numpy as np
