@@ -125,9 +125,11 @@ def prepare_case(args):
     raw = config.load_text(text, args.case)
     for assignment in args.set or []:
         config.apply_override(raw, assignment)
+    from parmps.boundaries.settings import resolve_paths as resolve_tables
     from parmps.geometry.settings import resolve_paths
-    # The stored case must find its meshes from the output directory too.
+    # The stored case must find its meshes and tables from the output directory too.
     moved = resolve_paths(raw, args.case)
+    moved = resolve_tables(raw, args.case) or moved
     limits = _override_limits(raw, args)
     try:
         case = schema.validate(raw)

@@ -1,18 +1,22 @@
 """Open boundaries: inflow buffer zones and outlets (docs/design.md §1.7, kind 4).
 
-Inlet. A box of ``m`` lattice columns (cross-sections of the flow: lines in
-2D, rectangles in 3D) of inflow-buffer particles that move rigidly at the
-uniform velocity U0 (along one axis). Column
-``c`` of inlet ``j`` sits at the distance ``s_c(t) = (m - c - 1/2) l0 + |U0| t``
-downstream of the upstream face: columns 0..m-1 fill the buffer at t = 0, and
-column ``c >= m`` enters at the upstream face once ``s_c(t) >= 0``. Particle
-``k`` of column ``c`` has the global id ``base_j + c * count + k``, with
-``base_j = N_scene + j * 2**40`` and ``count`` the particles per column, so ids
-depend on the case and the time alone, never on the rank count; every rank
-computes the new column and keeps the particles its slab owns. Buffer
-particles take part in the fluid step like fluid (number density, pressure
-unknowns, neighbours of the fluid) but their positions and velocities are reset
-to the prescribed motion after it; a particle whose ``s`` passes the buffer's
+Inlet. A box of ``m`` lattice columns along the flow (one axis) of inflow-buffer
+particles over ``count`` lanes, the lattice points across the flow (a line in 2D, a
+rectangle or the points inside a circle in 3D). Lane ``k`` moves at ``shape_k U(t)``:
+``U(t)`` the mean velocity (constant, ramped or tabulated, parmps.core.timeseries),
+``shape_k`` the profile across the opening (uniform or the fully developed laminar one,
+parmps.boundaries.profiles) scaled so that ``l0^(d-1) sum_k shape_k`` is the opening's
+area, so that the delivered flow rate is exactly the mean times the area. Particle
+``(c, k)`` of inlet ``j`` sits at the distance
+``s_ck(t) = (m - c - 1/2) l0 + shape_k S(t)`` downstream of the upstream face, with
+``S(t)`` the exact integral of U from 0: columns 0..m-1 fill the buffer at t = 0, and
+column ``c >= m`` of lane ``k`` enters at the upstream face once ``s_ck(t) >= 0``, each
+lane on its own. Its global id is ``base_j + c * count + k``, with
+``base_j = N_scene + j * 2**40``, so ids depend on the case and the time alone, never on
+the rank count or the step sizes; every rank computes the entering particles and keeps
+those its slab owns. Buffer particles take part in the fluid step like fluid (number
+density, pressure unknowns, neighbours of the fluid) but their positions and velocities
+are reset to the prescribed motion after it; a particle whose ``s`` passes the buffer's
 depth becomes fluid.
 
 Outlet. A side of the domain through which fluid leaves: particles beyond
@@ -41,6 +45,9 @@ from parmps.fluid.participant import Participant
 from parmps.core.particles import FLUID, INFLOW, Particles
 from parmps.core.geometry import format_point
 from parmps.geometry.scene import lattice_count, lattice_points
+from parmps.boundaries.profiles import parabolic
+from parmps.boundaries.settings import inflow_table
+from parmps.core.timeseries import Constant, Ramp, Table
 
 log = logging.getLogger(__name__)
 
@@ -66,12 +73,13 @@ class Inlet:
         if len(nonzero) != 1:
             raise CaseError(f"{self.name}.velocity {list(velocity)} must be non-zero and along "
                             f"one axis (every other component zero)")
-        self.velocity = velocity
         self.axis = int(nonzero[0])
-        # The axes across the flow: a column is a lattice over them.
+        # The axes across the flow: a lane is a point of a lattice over them.
         self.cross = [a for a in range(len(velocity)) if a != self.axis]
+        self.direction = np.zeros(len(velocity))
         self.sign = 1.0 if velocity[self.axis] > 0 else -1.0
-        self.speed = abs(float(velocity[self.axis]))
+        self.direction[self.axis] = self.sign
+        self.mean = mean_velocity(self.name, spec, abs(float(velocity[self.axis])))
         lower = np.asarray(spec["lower"], dtype=float)
         upper = np.asarray(spec["upper"], dtype=float)
         domain_lower = np.asarray(case["domain"]["lower"])
@@ -92,38 +100,37 @@ class Inlet:
                                 upper[a] - lower[a], spacing) for a in self.cross]
         self.depth = self.columns * spacing
         self.upstream = lower[self.axis] if self.sign > 0 else upper[self.axis]
-        # One column's cross-section (count × (d - 1)): the lattice across the flow.
-        self.across = lattice_points(lower[self.cross], counts, spacing)
+        self.across, self.shape = lanes(self.name, spec, lower[self.cross], upper[self.cross],
+                                        counts, spacing)
         self.count = len(self.across)
         self.base = int(base)
-        self.created = self.columns  # columns 0..created-1 exist
+        # Lane k holds the columns 0..created[k]-1.
+        self.created = np.full(self.count, self.columns, np.int64)
 
-    def distance(self, column, time):
-        """s_c(t): distance of column c downstream of the upstream face."""
-        return (self.columns - column - 0.5) * self.spacing + self.speed * time
+    def distance(self, column, lane, time):
+        """s_ck(t) = (m - c - 1/2) l0 + shape_k S(t): how far particle (c, k) is downstream
+        of the upstream face, S(t) the integral of the mean velocity."""
+        return (self.columns - column - 0.5) * self.spacing + \
+            self.shape[lane] * self.mean.integral(time)
 
-    def _positions(self, column, time):
-        """Positions of the particles of the given columns (arrays of equal length)."""
-        s = self.distance(column, time)
-        position = np.empty((len(column), len(self.velocity)))
+    def _particles(self, column, lane, time):
+        """Buffer particles (column c, lane k): ids base + c count + k, and their ``s``."""
+        s = self.distance(column, lane, time)
+        position = np.empty((len(column), len(self.direction)))
         position[:, self.axis] = self.upstream + self.sign * s
-        return position, s
-
-    def particles(self, columns, time):
-        """Buffer particles of whole columns: ids base + c count + k."""
-        column = np.repeat(np.asarray(columns, dtype=np.int64), self.count)
-        k = np.tile(np.arange(self.count, dtype=np.int64), len(columns))
-        position, _ = self._positions(column, time)
-        position[:, self.cross] = self.across[k]
+        position[:, self.cross] = self.across[lane]
+        velocity = np.outer(self.shape[lane] * self.mean.value(time), self.direction)
         return Particles({
-            "id": self.base + column * self.count + k,
+            "id": self.base + column * self.count + lane,
             "kind": np.full(len(column), INFLOW, np.int8),
             "position": position,
-            "velocity": np.tile(self.velocity, (len(column), 1)),
-        })
+            "velocity": velocity,
+        }), s
 
     def initial(self):
-        return self.particles(np.arange(self.columns), 0.0)
+        column = np.repeat(np.arange(self.columns, dtype=np.int64), self.count)
+        lane = np.tile(np.arange(self.count, dtype=np.int64), self.columns)
+        return self._particles(column, lane, 0.0)[0]
 
     def update(self, particles, time):
         """Prescribed motion of this inlet's owned buffer particles; returns how many
@@ -133,23 +140,68 @@ class Inlet:
         mine = np.flatnonzero((particles.kind[:n] == INFLOW) & (ids >= self.base) &
                               (ids < self.base + ID_STRIDE))
         offset = ids[mine] - self.base
-        column, k = offset // self.count, offset % self.count
-        position, s = self._positions(column, time)
-        position[:, self.cross] = self.across[k]
-        particles.position[mine] = position
-        particles.velocity[mine] = self.velocity
+        moved, s = self._particles(offset // self.count, offset % self.count, time)
+        particles.position[mine] = moved.position
+        particles.velocity[mine] = moved.velocity
         passed = mine[s > self.depth]
         particles.kind[passed] = FLUID
         return len(passed)
 
-    def new_columns(self, time):
-        """Columns whose time to enter has come (the same on every rank)."""
-        last = int(np.floor(self.columns - 0.5 + self.speed * time / self.spacing)) + 1
-        columns = np.arange(self.created, max(last, self.created) + 1)
-        columns = columns[self.distance(columns, time) >= 0.0]
-        if len(columns):
-            self.created = int(columns[-1]) + 1
-        return columns
+    def entering(self, time):
+        """The particles whose time to enter has come, lane by lane (the same on every
+        rank): lane k's columns up to the last with s >= 0."""
+        lane_all = np.arange(self.count, dtype=np.int64)
+        last = np.floor(self.columns - 0.5 + self.shape * self.mean.integral(time) /
+                        self.spacing).astype(np.int64)
+        # Rounding may put the last column a hair upstream of the face: it waits.
+        last -= self.distance(last, lane_all, time) < 0.0
+        new = np.maximum(last + 1 - self.created, 0)
+        lane = np.repeat(lane_all, new)
+        # Column created[k] + j for the j-th new particle of lane k.
+        first = np.repeat(self.created, new)
+        j = np.arange(len(lane)) - np.repeat(np.cumsum(new) - new, new)
+        self.created = self.created + new
+        return self._particles(first + j, lane, time)[0]
+
+    def speed(self, time, until):
+        """The fastest lane's largest speed over [time, until]."""
+        return float(self.shape.max()) * self.mean.peak(time, until)
+
+
+def mean_velocity(name, spec, speed):
+    """The inlet's mean speed as a function of time: constant, ramped or tabulated."""
+    if spec["table"]:
+        table = inflow_table(name, spec)
+        return Table(table[:, 0], table[:, 1])
+    if spec["ramp"] is not None:
+        return Ramp(speed, spec["ramp"])
+    return Constant(speed)
+
+
+def lanes(name, spec, lower, upper, counts, spacing):
+    """The lanes' positions across the flow (count x (d - 1)) and their speeds over the
+    mean, scaled so that their sum times l0^(d-1) is the opening's area: the delivered
+    flow rate is the mean times the area, whatever the lattice."""
+    across = lattice_points(lower, counts, spacing)
+    centre = 0.5 * (lower + upper)
+    radius = spec["radius"] if spec["shape"] == "circle" else None
+    if radius is not None:
+        # Only the lattice points strictly inside the circle are lanes.
+        across = across[np.sum((across - centre) ** 2, axis=1) < radius ** 2]
+        area = np.pi * radius ** 2
+    else:
+        area = float(np.prod(upper - lower))
+    if spec["profile"] == "parabolic":
+        shape = parabolic(across, centre, upper - lower, radius)
+    else:
+        shape = np.ones(len(across))
+    lane_area = spacing ** len(counts)
+    scale = area / (lane_area * shape.sum())
+    if abs(scale - 1.0) > 1e-9:
+        log.info("%s: %d lanes, a %s profile scaled by %.6f so that the flow rate is the "
+                 "mean times the area %.6g m^%d", name, len(across), spec["profile"], scale,
+                 area, len(counts))
+    return across, shape * scale
 
 
 class OpenBoundaries(Participant):
@@ -184,12 +236,21 @@ class OpenBoundaries(Participant):
     exchanges_fluid = True
 
     def checkpoint_state(self):
-        return {"created": np.array([inlet.created for inlet in self.inlets], np.int64),
+        # Every inlet's lanes' counts, one after the other.
+        lanes = [inlet.created for inlet in self.inlets]
+        return {"lanes_created": np.concatenate(lanes) if lanes else np.zeros(0, np.int64),
                 "inflow_total": self.inflow_total, "outflow_total": self.outflow_total}
 
     def restore_state(self, saved):
-        for inlet, created in zip(self.inlets, np.atleast_1d(saved["created"])):
-            inlet.created = int(created)
+        if "lanes_created" in saved:
+            created = np.asarray(saved["lanes_created"], np.int64)
+            ends = np.cumsum([inlet.count for inlet in self.inlets])
+            for inlet, lane in zip(self.inlets, np.split(created, ends[:-1])):
+                inlet.created = lane.copy()
+        else:
+            # A checkpoint from before the lanes: one column count per (uniform) inlet.
+            for inlet, created in zip(self.inlets, np.atleast_1d(saved["created"])):
+                inlet.created = np.full(inlet.count, int(created), np.int64)
         self.inflow_total = int(saved["inflow_total"])
         self.outflow_total = int(saved["outflow_total"])
 
@@ -199,6 +260,10 @@ class OpenBoundaries(Participant):
         for j, inlet in enumerate(self.inlets):
             inlet.base = scene_count + j * ID_STRIDE
         return [(inlet.name, inlet.initial()) for inlet in self.inlets]
+
+    def speed(self, time, until):
+        """The inlets' fastest lane over [time, until]: a ramp or a table speeds them up."""
+        return max([inlet.speed(time, until) for inlet in self.inlets], default=0.0)
 
     def _in_outflow_zone(self, position, axis, side, start):
         return position[:, axis] < start if side < 0 else position[:, axis] > start
@@ -270,9 +335,8 @@ class OpenBoundaries(Participant):
         removed = int(np.count_nonzero(gone))
         parts = [owned.select(np.flatnonzero(~gone)) if removed else owned]
         for inlet in self.inlets:
-            columns = inlet.new_columns(time)
-            if len(columns):
-                entering = inlet.particles(columns, time)
+            entering = inlet.entering(time)
+            if entering.n_owned:
                 keep = np.flatnonzero(owner(entering.position) == comm.rank)
                 parts.append(entering.select(keep))
         result = Particles.concatenate(parts) if len(parts) > 1 else parts[0]

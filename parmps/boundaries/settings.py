@@ -2,7 +2,10 @@
 
 import math
 
+import numpy as np
+
 from parmps.config import ZERO, Key, PerDimension, Section, check_ordered_box
+from parmps.core.timeseries import read_table
 from parmps.errors import CaseError
 
 # Prescribed motion of a tank or wall box (parmps.boundaries.walls): its wall and dummy
@@ -46,9 +49,29 @@ SECTIONS = {
     "inlet": Section({
         "lower": Key("vector", doc="lower-left corner of the buffer zone"),
         "upper": Key("vector", doc="upper-right corner of the buffer zone"),
-        "velocity": Key("vector", doc="uniform inflow velocity U0, along one axis [m/s]"),
-    }, many=True, doc="an inflow buffer zone: lattice columns of inflow particles moving at "
-                      "U0; new columns enter at its upstream face, particles leaving its "
+        "velocity": Key("vector", doc="the mean inflow velocity U0, along one axis [m/s]; "
+                                      "with a table, only its direction is used"),
+        "profile": Key("str", "uniform", choices=("uniform", "parabolic"),
+                       doc="the speed across the opening: \"uniform\" (U0 everywhere) or "
+                           "\"parabolic\", the fully developed laminar profile with mean "
+                           "U0: a channel's 1.5 U0 (1 - (2r/h)^2) in 2D, a rectangular "
+                           "duct's exact series in 3D, a pipe's 2 U0 (1 - (r/R)^2) with "
+                           "shape = \"circle\""),
+        "shape": Key("str", "box", choices=("box", "circle"),
+                     doc="the opening: the box's whole cross-section, or (3D) the circle "
+                         "of `radius` about the centre of that cross-section"),
+        "radius": Key("float", 0.0, ge=0.0, doc="shape circle: the opening's radius [m]"),
+        "ramp": Key("float", None, gt=0.0,
+                    doc="start the mean as U0 (1 - cos(pi t / ramp)) / 2 for t < ramp, "
+                        "then U0 (Turek & Hron's start) [s]; default: U0 from t = 0"),
+        "table": Key("str", "",
+                     doc="a text file of two columns, t [s] and the mean speed [m/s] along "
+                         "`velocity`'s direction (>= 0), t increasing: interpolated "
+                         "linearly, held constant past its ends; a relative path is from "
+                         "the case file's directory"),
+    }, many=True, doc="an inflow buffer zone: lattice lanes of inflow particles, each "
+                      "moving at its share of the profile times the mean U0(t); a lane's "
+                      "new particles enter at its upstream face, particles leaving its "
                       "downstream face become fluid"),
     "outlet": Section({
         "side": Key("str", choices=("left", "right", "front", "back", "bottom", "top"),
@@ -75,6 +98,8 @@ def check(case):
     for kind in (*WALL_SECTIONS, "inlet"):
         for k, item in enumerate(case[kind]):
             check_ordered_box(f"{kind}[{k}]", item)
+    for k, inlet in enumerate(case["inlet"]):
+        check_inlet(f"inlet[{k}]", inlet, case["dimension"])
     for kind in WALL_SECTIONS:
         for k, item in enumerate(case[kind]):
             if not item["move_end"] > item["move_start"]:
@@ -113,3 +138,49 @@ def check_not_periodic(case):
                             f"{'xyz'[along[0]]!r} (domain.periodic): a periodic axis has no "
                             f"open side; drive the flow with a body force "
                             f"(physics.gravity) instead")
+
+
+def check_inlet(name, inlet, dimension):
+    """The profile's, the ramp's and the table's keys of one inlet (the table is read)."""
+    if inlet["shape"] == "circle":
+        if dimension == 2:
+            raise CaseError(f"{name}.shape \"circle\" is an opening of a 3D case; a 2D "
+                            f"opening is the box's side")
+        if not inlet["radius"] > 0.0:
+            raise CaseError(f"{name}.radius must be > 0 with shape = \"circle\"")
+        widths = [u - l for l, u in zip(inlet["lower"], inlet["upper"])]
+        across = [w for a, w in enumerate(widths) if inlet["velocity"][a] == 0.0]
+        if len(across) == dimension - 1 and 2.0 * inlet["radius"] > min(across) * (1 + 1e-12):
+            raise CaseError(f"{name}.radius {inlet['radius']:g}: the circle must fit in the "
+                            f"box's cross-section ({' x '.join(f'{w:g}' for w in across)})")
+    elif inlet["radius"] != 0.0:
+        raise CaseError(f"{name}.radius is only read with shape = \"circle\"")
+    if inlet["table"]:
+        if inlet["ramp"] is not None:
+            raise CaseError(f"{name}: give ramp or table, not both (a table starts as it "
+                            f"gives)")
+        table = inflow_table(name, inlet)
+        if np.any(table[:, 1] < 0.0):
+            raise CaseError(f"{name}.table: the mean speeds must be >= 0 (an inlet cannot "
+                            f"run backwards); {inlet['table']} has {table[:, 1].min():g}")
+
+
+def inflow_table(name, inlet):
+    """The inlet's table (rows t, mean speed), checked."""
+    return read_table(inlet["table"], f"{name}.table")
+
+
+def resolve_paths(raw, case_file):
+    """Make the inlets' relative table paths of a parsed case absolute, from the directory of
+    ``case_file``; returns whether any changed."""
+    import os
+
+    base = os.path.dirname(os.path.abspath(case_file))
+    changed = False
+    entries = raw.get("inlet", [])
+    for entry in entries if isinstance(entries, list) else [entries]:
+        path = entry.get("table") if isinstance(entry, dict) else None
+        if isinstance(path, str) and path and not os.path.isabs(path):
+            entry["table"] = os.path.normpath(os.path.join(base, path))
+            changed = True
+    return changed

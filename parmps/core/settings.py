@@ -47,8 +47,16 @@ SECTIONS = {
                                           "(origin + (i + 1/2) l0)"),
     }),
     "physics": Section({
-        "gravity": Key("vector", PerDimension(-9.81), doc="[m/s^2]"),
-    }),
+        "gravity": Key("vector", PerDimension(-9.81),
+                       doc="the body force per unit mass g0 [m/s^2]; with "
+                           "gravity_amplitude, its steady part"),
+        "gravity_amplitude": Key("vector", ZERO,
+                                 doc="A [m/s^2]: the body force is g0 + A cos(2 pi f t), f "
+                                     "= gravity_frequency (a pulsatile pipe driven by an "
+                                     "oscillating pressure gradient); [0, 0]: steady"),
+        "gravity_frequency": Key("float", 0.0, ge=0.0,
+                                 doc="f [Hz] of gravity_amplitude's oscillation"),
+    }, doc="the body force: steady, or oscillating about a steady part"),
 }
 
 
@@ -85,8 +93,35 @@ def check(case):
         if not upper[axis] > lower[axis]:
             raise CaseError(f"domain.upper.{label} ({upper[axis]}) must exceed "
                             f"domain.lower.{label} ({lower[axis]})")
+    check_body_force(case)
     if case["particles"]["snap"] and case["particles"]["spacing"] is not None:
         snap_boxes(case)
+
+
+
+def check_body_force(case):
+    """An oscillation needs both its amplitude and its frequency; bodies cannot follow it."""
+    physics = case["physics"]
+    oscillates = any(a != 0.0 for a in physics["gravity_amplitude"])
+    if oscillates != (physics["gravity_frequency"] > 0.0):
+        given, missing = (("gravity_amplitude", "gravity_frequency") if oscillates
+                          else ("gravity_frequency", "gravity_amplitude"))
+        raise CaseError(f"physics.{given} is set but physics.{missing} is not: an "
+                        f"oscillating body force needs both")
+    feeling = [k for k, body in enumerate(case.get("body", ())) if body.get("gravity")]
+    if oscillates and feeling:
+        raise CaseError(f"physics.gravity_amplitude: body[{feeling[0]}] feels gravity, but "
+                        f"the bodies follow only a steady one; set body[{feeling[0]}].gravity "
+                        f"= false")
+
+
+def body_force(case):
+    """The case's body force per unit mass as a function of time
+    (:class:`parmps.core.timeseries.Oscillation`)."""
+    from parmps.core.timeseries import Oscillation
+    physics = case["physics"]
+    return Oscillation(physics["gravity"], physics["gravity_amplitude"],
+                       physics["gravity_frequency"])
 
 
 # The sections whose entries are boxes of particles (lower, upper corners).

@@ -5,7 +5,10 @@ plus potential, the bodies' kinetic and elastic energy included): a rise that no
 outlet or moving wall paid for is a numerical source. Each fluid particle stands for the
 mass ``rho l0^d``; the potential energy is measured from a datum, the point of the initial
 fluid lowest along gravity, so a still column's energy is its own and a 1 % rise means 1 %
-of what the flow has to spend.
+of what the flow has to spend. With a body force that varies in time the potential energy
+is measured with the field of the moment, ``-sum m g(t).(x - datum)``: it then changes at
+fixed positions too, and that change, the field's work, is the ``body_force_work`` the budget
+subtracts (the datum stays the one taken along g(0)).
 
 Along a periodic axis a body force has no potential (a particle that goes round the
 period comes back lower): there its power, ``sum m g.u``, is integrated over the steps
@@ -66,8 +69,10 @@ def rise_scale(initial, row):
 
 def budget(row):
     """What can only fall in a flow with fixed walls and no inflow: the fluid's and the
-    bodies' energy less the work the boundaries did, from a diagnostics row (or columns)."""
-    return row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+    bodies' energy less the work the boundaries and a time-varying body force did, from a
+    diagnostics row (or columns)."""
+    return (row["fluid_energy"] + row.get("body_energy", 0.0) - row["boundary_work"]
+            - row.get("body_force_work", 0.0))
 
 
 def energy_datum(particles, gravity, comm):

@@ -20,9 +20,10 @@ import logging
 
 import numpy as np
 
+from parmps.core import settings as core_settings
 from parmps.core.geometry import outside_box
+from parmps.core.particles import FLUID, INFLOW
 from parmps.geometry.domain import Domain
-from parmps.core.particles import FLUID
 from parmps.errors import RunFailure
 from parmps.fluid import energy
 from parmps.fluid.projection import check_finite, max_speed
@@ -80,9 +81,17 @@ class FluidStepper:
         self.step_imbalance = 1.0
         constants = fluid.constants
         self.particle_mass = constants.density * constants.spacing ** constants.dimension
-        # Along a periodic axis gravity has no potential: its work is counted as it is done.
-        self.gravity, self.drive = energy.split_body_force(
-            fluid.gravity, Domain.from_case(case).periodic)
+        # The body force g(t): the step is given its mean over the step (the exact
+        # impulse), the energy its value at the diagnostics' time. Along a periodic axis it
+        # has no potential: its power on the fluid is integrated instead (the drive).
+        self.body_force = core_settings.body_force(case)
+        self.periodic = Domain.from_case(case).periodic
+        self.gravity = energy.split_body_force(fluid.gravity, self.periodic)[0]
+        if self.body_force.varies:
+            # The work of a varying body force on the fluid, -sum m dg . (x - datum) over
+            # the steps (this rank's share) [J]: the potential energy's explicit change.
+            self.DIAGNOSTICS["body_force_work"] = np.float64
+        self.field_work = 0.0
         self.energy_datum = None  # set at the first start, kept by checkpoints
         # The fluid's energy after the first step, and the lowest budget (fluid and bodies
         # less the boundaries' work) since: a rise above it is a numerical source.
@@ -100,6 +109,7 @@ class FluidStepper:
         saved[self.escaped.name] = self.escaped.checkpoint_state()
         saved["energy"] = {"datum": np.asarray(self.energy_datum, dtype=float),
                            "exchanged": self.comm.allreduce(self.exchanged_energy),
+                           "field_work": self.comm.allreduce(self.field_work),
                            "initial": np.nan if self.initial_energy is None
                            else self.initial_energy,
                            "lowest": np.nan if self.lowest_budget is None
@@ -119,6 +129,8 @@ class FluidStepper:
             # One rank carries the total so far; the sum over the ranks is the total.
             self.exchanged_energy = (float(saved["energy"]["exchanged"])
                                      if self.comm.rank == 0 else 0.0)
+            self.field_work = (float(saved["energy"].get("field_work", 0.0))
+                               if self.comm.rank == 0 else 0.0)
             if not np.isnan(saved["energy"]["initial"]):
                 self.initial_energy = float(saved["energy"]["initial"])
                 self.lowest_budget = float(saved["energy"]["lowest"])
@@ -128,6 +140,7 @@ class FluidStepper:
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
         self.fluid_speed = max_speed(state.particles, self.comm)
+        self._set_gravity(state.time)
         if self.energy_datum is None:
             self.energy_datum = energy.energy_datum(state.particles, self.gravity, self.comm)
         # The walls away from the water weigh as dummies in the balance from the first
@@ -184,10 +197,23 @@ class FluidStepper:
             given = participant.pressure_mobility(particles)
             if given is not None:
                 mobility = given if mobility is None else mobility * given
-        power = self._drive_power(particles)
+        if self.body_force.varies:
+            before = self._first_moment(particles)
+            self.fluid.gravity = self.body_force.mean(time, time + dt)
+        drive = energy.split_body_force(self.fluid.gravity, self.periodic)[1]
+        power = self._drive_power(particles, drive)
+        buffer_energy = self._buffer_energy(particles)
         self.stats = self.fluid.step(particles, dt, step, dirichlet, mobility)
-        # The trapezoidal rule over the step, as the velocities change within it.
-        self.exchanged_energy += 0.5 * dt * (power + self._drive_power(particles))
+        # What the buffers lost in the step the fluid's pressure and viscosity took.
+        self.exchanged_energy -= self._buffer_energy(particles) - buffer_energy
+        # The drive's work: the trapezoidal rule over the step, as the velocities change.
+        self.exchanged_energy += 0.5 * dt * (power + self._drive_power(particles, drive))
+        if self.body_force.varies:
+            # The same fluid, before and after its step: the field's change times the
+            # fluid's mean first moment over the step.
+            moment = 0.5 * (before + self._first_moment(particles))
+            self._set_gravity(time + dt)
+            self.field_work -= float((self.gravity - self._last_gravity) @ moment)
         for participant in self.participants:
             if participant.exchanges_fluid:
                 before = sum(self._fluid_energy(particles))
@@ -195,6 +221,31 @@ class FluidStepper:
             if participant.exchanges_fluid:
                 self.exchanged_energy += sum(self._fluid_energy(particles)) - before
         state.particles = particles
+
+    def _set_gravity(self, time):
+        """The body force the energy is measured with: g(time)."""
+        if self.body_force.varies:
+            self._last_gravity = self.gravity
+            self.gravity = energy.split_body_force(self.body_force.value(time),
+                                                   self.periodic)[0]
+
+    def _buffer_energy(self, particles):
+        """This rank's mechanical energy of its owned inflow and outflow buffer particles,
+        under the step's body force. The step moves them like fluid before their
+        prescribed motion resets them: the energy they lose in it is the work the buffers
+        (pistons of a set speed) did on the fluid."""
+        n = particles.n_owned
+        buffers = particles.kind[:n] == INFLOW
+        if not buffers.any():
+            return 0.0
+        return sum(energy.fluid_energy(particles, self.particle_mass, self.fluid.gravity,
+                                       self.energy_datum, buffers))
+
+    def _first_moment(self, particles):
+        """This rank's sum of m (x - datum) over its owned fluid."""
+        n = particles.n_owned
+        fluid = particles.kind[:n] == FLUID
+        return self.particle_mass * (particles.position[:n][fluid] - self.energy_datum).sum(0)
 
     def _count_extra_work(self, dt):
         """Tell the decomposition the work each rank does beyond its particles (a body's
@@ -255,8 +306,8 @@ class FluidStepper:
         fluid = particles.kind[:n] == FLUID
         work = self.exchanged_energy + sum(p.work() for p in self.participants)
         sums = np.array([*self._fluid_energy(particles, fluid), work,
-                         np.count_nonzero(fluid)])
-        kinetic, potential, work, n_fluid = comm.allreduce(sums)
+                         np.count_nonzero(fluid), self.field_work])
+        kinetic, potential, work, n_fluid, field_work = comm.allreduce(sums)
         values = {"ksp_iterations": self.stats["ksp_iterations"],
                   "ksp_residual": self.stats["ksp_residual"],
                   "max_speed": self.fluid_speed, "kinetic_energy": kinetic,
@@ -265,6 +316,8 @@ class FluidStepper:
                   "n_fluid": int(n_fluid),
                   "n_escaped": self.escaped.total,
                   "imbalance": self.step_imbalance}
+        if self.body_force.varies:
+            values["body_force_work"] = field_work
         for participant in self.participants:
             values.update(participant.diagnostics())
         self._follow_budget(values)
@@ -285,11 +338,12 @@ class FluidStepper:
             return 0.0
         return (self.budget - self.lowest_budget) / self.rise_scale
 
-    def _drive_power(self, particles):
-        """This rank's power of the body force along the periodic axes on its fluid [W]."""
-        if self.drive is None:
+    def _drive_power(self, particles, drive):
+        """This rank's power of the body force ``drive`` (along the periodic axes; None:
+        none) on its owned fluid [W]."""
+        if drive is None:
             return 0.0
-        return energy.body_force_power(particles, self.particle_mass, self.drive)
+        return energy.body_force_power(particles, self.particle_mass, drive)
 
     def _fluid_energy(self, particles, mask=None):
         """This rank's (kinetic, potential) energy of its owned fluid."""
