@@ -329,3 +329,18 @@ def test_the_couette_lid_on_several_ranks_matches_one_rank(one_rank_couette, tmp
     result = run_parmps([COUETTE, "-o", tmp_path] + TIGHT, ranks=2, timeout=120)
     assert result.returncode == 0, result.stderr
     _assert_same_by_id(one_rank_couette, tmp_path)
+
+
+def test_womersleys_solution_tends_to_poiseuille_when_slow_and_to_a_plug_when_fast():
+    """The reference of validation/womersley_3d (whose run is `python -m parmps validate
+    womersley_3d`, 38 s): at alpha -> 0 the quasi-steady Hagen-Poiseuille profile in phase
+    with the force, at alpha -> infinity a plug A sin(omega t)/omega lagging it by 90 degrees."""
+    from parmps.tools.analysis import hagen_poiseuille_series, womersley_velocity
+    r = np.linspace(0.0, 0.0079, 9)
+    slow = womersley_velocity(r, 0.0, 1.0, 1e-4, 1e-3, 0.008)
+    np.testing.assert_allclose(slow, hagen_poiseuille_series(r, 1e9, 1.0, 1e-3, 0.008),
+                               rtol=1e-5)
+    omega = 2 * np.pi * 1e4
+    quarter = 0.25 / 1e4
+    fast = womersley_velocity(r[:4], quarter, 1.0, 1e4, 1e-3, 0.008)
+    np.testing.assert_allclose(fast, 1.0 / omega, rtol=1e-3)
