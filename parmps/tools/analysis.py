@@ -1283,3 +1283,43 @@ def womersley_profile(path, case, wall="pipe", periods=2, radius=None):
     return {"amplitude_error": got / want - 1.0, "phase_error": float(phase),
             "centre_amplitude": got, "womersley_number": radius * np.sqrt(omega / nu),
             "profile_rms": float(np.sqrt(np.mean(squares)) / want), "end": end}
+
+
+# --------------------------------------------------------------------------
+# A channel fed through a profiled inlet: what it delivers, and the profile downstream
+
+def inlet_channel(path, case, section, start):
+    """A 2D channel fed through its first ``[[inlet]]`` (validation/channel_inlet_2d/):
+    ``flow_rate``, the volume that became fluid at the inlet by the end (the ``inflow``
+    count times l0^2) over the requested mean velocity's integral times the opening's width,
+    minus one; ``profile_rms``, over the frames from ``start`` [s] and the fluid with x in
+    ``section`` [m], the RMS of u - 1.5 U (1 - (2 y'/h)^2) over 1.5 U (y' from the centre
+    line, U the mean at the frame's time); ``end`` [s]."""
+    from parmps.boundaries.open import mean_velocity
+    from parmps.result import open_result
+    inlet = case["inlet"][0]
+    axis = int(np.flatnonzero(np.asarray(inlet["velocity"]) != 0.0)[0])
+    cross = 1 - axis
+    speed = abs(float(inlet["velocity"][axis]))
+    mean = mean_velocity("inlet[0]", inlet, speed)
+    low, high = inlet["lower"][cross], inlet["upper"][cross]
+    width, middle = high - low, 0.5 * (low + high)
+    spacing = case["particles"]["spacing"]
+    squares = []
+    with open_result(path) as result:
+        d = result.diagnostics
+        end = float(d["time"][-1])
+        delivered = float(d["inflow"][-1]) * spacing ** 2
+        for frame in result.frames:
+            if frame.time < start:
+                continue
+            fluid = frame.kind == 0
+            x = frame.position[fluid, axis]
+            inside = (x >= section[0]) & (x <= section[1])
+            y = frame.position[fluid, cross][inside] - middle
+            u = abs(frame.velocity[fluid, axis][inside])
+            peak = 1.5 * mean.value(frame.time)
+            squares.append(np.mean((u - peak * (1.0 - (2.0 * y / width) ** 2)) ** 2)
+                           / peak ** 2)
+    return {"flow_rate": delivered / (mean.integral(end) * width) - 1.0,
+            "profile_rms": float(np.sqrt(np.mean(squares))), "end": end}
