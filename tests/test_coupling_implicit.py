@@ -38,7 +38,8 @@ def coupling_of(case, scheme=ImplicitPressureCoupling):
     constants = MPSConstants.from_case(case)
     gradient = scheme_class(GRADIENTS, case["mps"]["gradient"])(
         case["mps"][case["mps"]["gradient"]], constants)
-    fluid = SimpleNamespace(constants=constants, gradient=gradient)
+    # viscous_velocity: None after a step that took viscosity explicitly.
+    fluid = SimpleNamespace(constants=constants, gradient=gradient, viscous_velocity=None)
     return scheme(MassSpringModel.from_case(case), MPI.COMM_SELF, fluid)
 
 
