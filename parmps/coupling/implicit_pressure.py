@@ -34,7 +34,9 @@ The node's own share of
 the relaxation beyond the fluid's is therefore taken implicitly (backward
 Euler in u_i): the force is divided by ``1 + dt k_i (1/m_i - 1/m_0)``, m_0 the
 mass of a fluid particle. At density ratio 1 and above the force is the weak
-coupling's unchanged.
+coupling's unchanged. In a step beyond the viscous limit the fluid's viscous term is implicit
+(:mod:`parmps.fluid.viscous`) and the node's whole relaxation is taken implicitly, in either
+coupling (:meth:`parmps.coupling.weak.WeakCoupling.node_forces`).
 """
 
 import numpy as np

@@ -61,7 +61,8 @@ class ImplicitViscosity:
             from parmps.fluid.ppe import PressureSolver
             self.solver = PressureSolver(self.comm, self.settings, self.command_line,
                                          dimension=self.constants.dimension,
-                                         re_laplacian=self.constants.re_laplacian,
+                                         re_laplacian=(self.constants.re_laplacian
+                                                       / self.constants.spacing),
                                          prefix=OPTIONS_PREFIX, name="viscous")
             if self.comm.rank == 0:
                 log.info("viscous solver: %s", self.solver.describe())
