@@ -21,7 +21,8 @@ class Key:
 
     kind is one of "float", "int", "bool", "str", "vector" (d floats, d the
     case's dimension), "vec2" (two floats, whatever the dimension),
-    "floats" (a list of floats), "ints" (a list of ints), "options" (a table of
+    "floats" (a list of floats), "ints" (a list of ints), "strs" (a list of strings, each
+    one of ``choices`` when given), "options" (a table of
     scalars passed through, e.g. PETSc options), "points" (a list of [x, y]),
     "pairs" (a list of [i, j] integer pairs) or "tables" (an array of tables,
     ``[[section.key]]``, each checked against the sub-schema ``keys``) or "table"
@@ -51,10 +52,20 @@ class Key:
         value = _coerce(name, self.kind, value, dimension)
         for item in (value if self.kind in ("vector", "vec2", "floats", "ints") else [value]):
             self._check_range(name, item)
-        if self.choices is not None and value not in self.choices:
+        if self.kind == "strs":
+            self._check_strs(name, value)
+        elif self.choices is not None and value not in self.choices:
             raise CaseError(f"{name} must be one of {', '.join(map(repr, self.choices))}, "
                             f"got {value!r}")
         return value
+
+    def _check_strs(self, name, value):
+        for k, item in enumerate(value):
+            if self.choices is not None and item not in self.choices:
+                raise CaseError(f"{name}[{k}] must be one of "
+                                f"{', '.join(map(repr, self.choices))}, got {item!r}")
+            if item in value[:k]:
+                raise CaseError(f"{name} names {item!r} twice")
 
     def _check_range(self, name, value):
         if not isinstance(value, (int, float)) or isinstance(value, bool):
@@ -158,6 +169,11 @@ def _coerce(name, kind, value, dimension=2):
                             f"(domain.lower has {dimension}): give [{components}]")
         item_kind = "int" if kind == "ints" else "float"
         return [_coerce(f"{name}[{k}]", item_kind, v) for k, v in enumerate(value)]
+    if kind == "strs":
+        if not isinstance(value, list):
+            raise CaseError(f"{name} must be an array of strings, got {_type_name(value)} "
+                            f"{value!r}")
+        return [_coerce(f"{name}[{k}]", "str", v) for k, v in enumerate(value)]
     if kind in ("points", "pairs"):
         if not isinstance(value, list):
             raise CaseError(f"{name} must be an array, got {_type_name(value)} {value!r}")

@@ -72,7 +72,7 @@ class NoHalo:
     """A decomposition's ghost refresh on one rank with no ghosts, for a fluid step run
     without MPI."""
 
-    def refresh(self, arrays):
+    def refresh(self, arrays, positions=()):
         pass
 
 

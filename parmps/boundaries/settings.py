@@ -71,6 +71,7 @@ def check(case):
         if case["dimension"] == 2 and outlet["side"] in ("front", "back"):
             raise CaseError(f"outlet[{k}].side '{outlet['side']}' is a side of a 3D domain; "
                             f"a 2D one has left, right, bottom and top")
+    check_not_periodic(case)
     for kind in (*WALL_SECTIONS, "inlet"):
         for k, item in enumerate(case[kind]):
             check_ordered_box(f"{kind}[{k}]", item)
@@ -91,3 +92,24 @@ def check(case):
                         f"dt <= time.cfl x spacing / speed = "
                         f"{time['cfl'] * case['particles']['spacing'] / speed:.4g} s, but "
                         f"time.fixed_dt is {time['fixed_dt']:g} s")
+
+
+def check_not_periodic(case):
+    """Refuse an outlet on a side, or an inlet whose flow runs along an axis, the domain
+    repeats along (``domain.periodic``): a periodic axis has no open side."""
+    periodic = case["domain"].get("periodic", ())
+    dimension = case["dimension"]
+    for k, outlet in enumerate(case["outlet"]):
+        axis = {"left": 0, "right": 0, "front": 1, "back": 1,
+                "bottom": dimension - 1, "top": dimension - 1}[outlet["side"]]
+        if "xyz"[axis] in periodic:
+            raise CaseError(f"outlet[{k}].side '{outlet['side']}' is a face of the periodic "
+                            f"axis {'xyz'[axis]!r} (domain.periodic): a periodic axis has no "
+                            f"open side")
+    for k, inlet in enumerate(case["inlet"]):
+        along = [a for a, v in enumerate(inlet["velocity"]) if v != 0.0]
+        if along and "xyz"[along[0]] in periodic:
+            raise CaseError(f"inlet[{k}].velocity runs along the periodic axis "
+                            f"{'xyz'[along[0]]!r} (domain.periodic): a periodic axis has no "
+                            f"open side; drive the flow with a body force "
+                            f"(physics.gravity) instead")

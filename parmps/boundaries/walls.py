@@ -34,6 +34,7 @@ import numpy as np
 from parmps.core.geometry import format_point
 from parmps.core.particles import FLUID, INFLOW
 from parmps.errors import CaseError
+from parmps.geometry.domain import Domain
 from parmps.fluid.forces import pressure_force_from
 from parmps.fluid.participant import Participant
 
@@ -128,7 +129,8 @@ class MovingWalls(Participant):
         if not moving:
             return particles
         # The fluid step leaves ghost values of the start of the step.
-        decomposition.refresh([particles.position, particles.velocity, particles.pressure])
+        decomposition.refresh([particles.position, particles.velocity, particles.pressure],
+                              positions=(0,))
         n = particles.n_owned
         rows = np.flatnonzero(np.isin(particles.kind[:n], (FLUID, INFLOW)))
         for spec, low, high in moving:
@@ -178,6 +180,8 @@ class MovingWalls(Participant):
             first, last = position.min(axis=0), position.max(axis=0)
             velocity = np.asarray(spec["velocity"], dtype=float)
             room = np.where(velocity > 0, upper - last, first - lower)
+            # Along a periodic axis a wall wraps like the fluid: it never leaves.
+            room[list(Domain.from_case(case).periodic)] = math.inf
             with np.errstate(divide="ignore"):
                 allowed = np.where(velocity != 0, room / np.abs(velocity), math.inf)
             duration = min(end_time, spec["move_end"]) - spec["move_start"]

@@ -35,7 +35,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from parmps.core.geometry import cell_runs, closed_surface_sides, edge_lengths
-from parmps.core.particles import owned_fluid_in_box
+from parmps.core.particles import owned_fluid_near
+from parmps.geometry.domain import Domain
 from parmps.io.series import Series
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
@@ -245,6 +246,7 @@ class BodyCrossing(Observer):
         self.comm = result.comm
         self.result = result
         self.model = model
+        self.domain = Domain.from_case(case)
         self.index, body_spec = next((k, b) for k, b in enumerate(case["body"])
                                      if (b["name"] or f"body{k}") == self.body_name)
         spacing = case["particles"]["spacing"]
@@ -276,15 +278,14 @@ class BodyCrossing(Observer):
         else:
             body = self.model.body(self.body_name)
             vertices, facets = lattice_mid_surface(body.position, self.shape)
-        near = owned_fluid_in_box(particles, vertices.min(axis=0) - self.band,
-                                  vertices.max(axis=0) + self.band)
-        position = particles.position
+        near, position = owned_fluid_near(particles, vertices.min(axis=0) - self.band,
+                                          vertices.max(axis=0) + self.band, self.domain)
         if self.closed:
             # Every particle in the box has a side; one that moves less than the band in a
             # step (time.cfl <= 1) and changes sides went through the surface.
-            sides = closed_surface_sides(position[near], vertices, facets)
+            sides = closed_surface_sides(position, vertices, facets)
         else:
-            sides = mid_surface_sides(position[near], vertices, facets, self.band)
+            sides = mid_surface_sides(position, vertices, facets, self.band)
         keep = sides != 0
         gathered = self.comm.gather((particles.id[near][keep].astype(np.int64),
                                      sides[keep]), root=0)

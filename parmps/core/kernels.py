@@ -268,6 +268,42 @@ def vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows=Non
     return _vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, d):
+    out = velocity[:n_rows].copy()
+    for i in range(n_rows):
+        if is_fluid[i]:
+            continue
+        total = 0.0
+        mean = np.zeros(d)
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not is_fluid[j]:
+                continue
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w > 0.0:
+                total += w
+                for k in range(d):
+                    mean[k] += w * velocity[j, k]
+        if total > 0.0:
+            for k in range(d):
+                out[i, k] = 2.0 * velocity[i, k] - mean[k] / total
+    return out
+
+
+@numba.njit(cache=True)
+def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+    """The velocity the viscous term sees at the rows ``n_rows``: a fluid particle's own; a
+    wall's, dummy's or body node's ``2 u_i - <u>_i``, ``<u>_i`` the mean of its fluid
+    neighbours' velocities weighted by w(r) (its own where it has none), so that the
+    velocity extrapolated across the wall's surface meets the wall's there (Adami, Hu &
+    Adams 2012's no-slip wall)."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 2)
+    return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
+
+
 # --- divergence -------------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")
@@ -1040,14 +1076,31 @@ def poisson_rows_into(indptr, cols, position, radius, row_number, is_unknown, co
 @numba.njit(cache=True)
 def poisson_rows_room(indptr, cols, row_number):
     """Entries each block of :func:`poisson_rows_into` (split) can hold at most: this
-    rank's, every pair with an owned particle and a diagonal a row; the other ranks', every
-    pair with a ghost."""
+    rank's, every pair with a particle of this rank's rows and a diagonal a row; the other
+    ranks', every other pair. A ghost may carry one of this rank's rows: a periodic image
+    of an owned particle."""
     n_owned = indptr.shape[0] - 1
-    to_ghosts = 0
+    first, last = _owned_row_range(row_number, n_owned)
+    to_others = 0
     for p in range(indptr[n_owned]):
-        if cols[p] >= n_owned:
-            to_ghosts += 1
-    return indptr[n_owned] - to_ghosts + _pressure_rows(row_number, n_owned), to_ghosts
+        j = cols[p]
+        if j >= n_owned and (row_number[j] < first or row_number[j] > last):
+            to_others += 1
+    return indptr[n_owned] - to_others + _pressure_rows(row_number, n_owned), to_others
+
+
+@numba.njit(cache=True)
+def _owned_row_range(row_number, n_owned):
+    """The smallest and the largest row number of the owned particles (0, -1 if none)."""
+    first, last = 0, -1
+    for i in range(n_owned):
+        r = row_number[i]
+        if r >= 0:
+            if last < first:
+                first, last = r, r
+            else:
+                first, last = min(first, r), max(last, r)
+    return first, last
 
 
 @numba.njit(cache=True)

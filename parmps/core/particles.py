@@ -125,6 +125,22 @@ class Particles:
         return self.select(order)
 
 
+def owned_fluid_near(particles, low, high, domain=None):
+    """(rows, positions) of the owned fluid and inflow particles within the box [low, high]
+    (a body's, grown by a band), their positions taken, along a periodic axis of
+    ``domain`` (a :class:`parmps.geometry.domain.Domain`), at the image nearest the box's
+    centre: a body across the seam sees the particles on both sides of it as they lie
+    around it. ``domain`` None or not periodic: the positions as they are."""
+    n = particles.n_owned
+    position = particles.position[:n]
+    if domain is not None and domain.is_periodic:
+        position = domain.near(position, 0.5 * (np.asarray(low) + np.asarray(high)))
+    kind = particles.kind[:n]
+    rows = np.flatnonzero(((kind == FLUID) | (kind == INFLOW))
+                          & np.all((position >= low) & (position <= high), axis=1))
+    return rows, position[rows]
+
+
 def owned_fluid_in_box(particles, low, high):
     """Indices of the owned fluid and inflow particles (those the flow carries) within the
     box [low, high]: where a body's checks and counts look before their costlier tests."""

@@ -16,6 +16,13 @@ SECTIONS = {
                                  "drops it and the run goes on (spray thrown over a wall), "
                                  "counted in the diagnostics' n_escaped; \"stop\" stops the "
                                  "run. Any other particle outside always stops it"),
+        "periodic": Key("strs", [], choices=("x", "y", "z"),
+                        doc="axes along which the domain is periodic (e.g. [\"x\"]): its "
+                            "extent along each is the period; particles leaving one face "
+                            "enter at the other, neighbours are found across it, and walls "
+                            "that reach a periodic face continue across it. The period must "
+                            "be a whole number of spacings and the lattice must line up with "
+                            "the faces (domain.lower on particles.origin's lines)"),
         "max_escaped_fraction": Key("float", 0.01, ge=0.0, le=1.0,
                                     doc="with escaped_fluid = \"remove\", the run stops once "
                                         "more than this fraction of the fluid particles at "
@@ -70,6 +77,10 @@ def check(case):
         raise CaseError(f"missing key 'particles.spacing': the case has "
                         f"[[{particle_sections[0]}]] particles, which need a spacing")
     lower, upper = case["domain"]["lower"], case["domain"]["upper"]
+    for k, name in enumerate(case["domain"]["periodic"]):
+        if name not in "xyz"[:len(lower)]:
+            raise CaseError(f"domain.periodic[{k}] names axis {name!r}, which a "
+                            f"{len(lower)}D case does not have")
     for axis, label in enumerate("xyz"[:len(lower)]):
         if not upper[axis] > lower[axis]:
             raise CaseError(f"domain.upper.{label} ({upper[axis]}) must exceed "

@@ -55,7 +55,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
-from parmps.core.particles import SOLID, owned_fluid_in_box
+from parmps.core.particles import SOLID, owned_fluid_near
 from parmps.errors import RunFailure
 from parmps.fluid.forces import fluid_force_parts, fluid_forces
 from parmps.fluid.participant import Participant
@@ -117,29 +117,28 @@ def node_mobilities(model, constants):
     return first_node, np.concatenate(node_mobility)
 
 
-def fluid_inside(particles, vertices, facets, comm):
+def fluid_inside(particles, vertices, facets, comm, domain=None):
     """How many fluid (or inflow) particles lie inside the closed boundary ``facets`` (m, d)
-    of ``vertices`` (n, d): a body's, as its model gives it (``SolidModel.boundary``).
-    Collective."""
+    of ``vertices`` (n, d): a body's, as its model gives it (``SolidModel.boundary``), across
+    a periodic seam of ``domain`` too. Collective."""
     used = np.asarray(vertices)[np.unique(np.asarray(facets, dtype=np.int64))] \
         if len(facets) else np.zeros((0, particles.position.shape[1]))
     local = 0
     if len(used):
         # Only particles in the boundary's box can be inside: the test costs
         # particles x facets.
-        near = owned_fluid_in_box(particles, used.min(axis=0), used.max(axis=0))
-        local = int(np.count_nonzero(inside_boundary(particles.position[near], vertices,
-                                                     facets)))
+        _, position = owned_fluid_near(particles, used.min(axis=0), used.max(axis=0), domain)
+        local = int(np.count_nonzero(inside_boundary(position, vertices, facets)))
     return comm.allreduce(local, op=MPI.SUM)
 
 
-def shell_sides(particles, vertices, facets, band):
-    """(rows, ids, sides) of the owned fluid (or inflow) particles within ``band`` of the
-    closed surface's box: +1 inside, -1 outside."""
-    rows = owned_fluid_in_box(particles, vertices.min(axis=0) - band,
-                              vertices.max(axis=0) + band)
-    return rows, particles.id[rows], closed_surface_sides(particles.position[rows], vertices,
-                                                          facets)
+def shell_sides(particles, vertices, facets, band, domain=None):
+    """(rows, ids, sides, positions) of the owned fluid (or inflow) particles within ``band``
+    of the closed surface's box: +1 inside, -1 outside; their positions as the surface sees
+    them (across a periodic seam of ``domain``, at the image beside it)."""
+    rows, position = owned_fluid_near(particles, vertices.min(axis=0) - band,
+                                      vertices.max(axis=0) + band, domain)
+    return rows, particles.id[rows], closed_surface_sides(position, vertices, facets), position
 
 
 def hold_to_side(position, velocity, side, vertices, node_velocity, facets, depth, reach):
@@ -180,6 +179,7 @@ class WeakCoupling(Participant):
         self.model = model
         self.comm = comm
         self.fluid = fluid
+        self.domain = fluid.domain
         self.owners = [k % comm.size for k in range(len(model.bodies))]
         self.last_substeps = {body.name: 0 for body in model.bodies}
         # Closed shells with water inside: the coupling holds it to its side of them.
@@ -253,8 +253,9 @@ class WeakCoupling(Participant):
         # step's: the decomposition has migrated the particles already).
         self.sides = {}
         for k in self.enclosures:
-            rows, ids, sides = shell_sides(particles, *self.model.boundary(k), self._band())
-            self.sides[k] = (ids, sides, particles.position[rows].copy())
+            _, ids, sides, position = shell_sides(particles, *self.model.boundary(k),
+                                                  self._band(), self.domain)
+            self.sides[k] = (ids, sides, position)
         solid = particles.kind == SOLID
         particles.position[solid] += dt * particles.velocity[solid]
         return None
@@ -268,7 +269,8 @@ class WeakCoupling(Participant):
         comm = self.comm
         model = self.model
         # The fluid step leaves ghost values of the start of the step.
-        decomposition.refresh([particles.position, particles.velocity, particles.pressure])
+        decomposition.refresh([particles.position, particles.velocity, particles.pressure],
+                              positions=(0,))
         n = particles.n_owned
         rows = np.flatnonzero(particles.kind[:n] == SOLID)
         force = self.node_forces(particles, rows, dt)
@@ -296,7 +298,8 @@ class WeakCoupling(Participant):
                                  f"{time + dt:.6g} s (the fluid force or the substeps went "
                                  f"unstable)")
             index = rows[mine]
-            particles.position[index] = body.position[node_of[mine]]
+            # Inside the period: the body keeps its own positions, unwrapped, across a seam.
+            particles.position[index] = self.domain.wrapped(body.position[node_of[mine]])
             particles.velocity[index] = body.velocity[node_of[mine]]
         for k in self.enclosures:
             self.held_back[model.bodies[k].name] = self._hold(particles, k)
@@ -310,13 +313,15 @@ class WeakCoupling(Participant):
         (:func:`hold_to_side`); returns how many, over every rank (collective)."""
         before_ids, before_sides, before_position = self.sides[k]
         vertices, facets = self.model.boundary(k)
-        rows, ids, sides = shell_sides(particles, vertices, facets, self._band())
+        rows, ids, sides, seen = shell_sides(particles, vertices, facets, self._band(),
+                                             self.domain)
         _, now, before = np.intersect1d(ids, before_ids, assume_unique=True,
                                         return_indices=True)
         crossed = sides[now] != before_sides[before]
         index, side = rows[now[crossed]], before_sides[before[crossed]]
         if len(index):
-            position = particles.position[index]
+            # Beside the surface (a migration wraps one put past a periodic face).
+            position = seen[now[crossed]]
             velocity = particles.velocity[index]
             spacing = self.fluid.constants.spacing
             wrong = hold_to_side(position, velocity, side, vertices,
@@ -369,6 +374,7 @@ class WeakCoupling(Participant):
         """{body name: {"fluid_inside": count, "held_back": the particles a shell held to
         their side in the last step}} (collective)."""
         return {body.name: {"fluid_inside": fluid_inside(state.particles,
-                                                         *self.model.boundary(k), self.comm),
+                                                         *self.model.boundary(k), self.comm,
+                                                         self.domain),
                             "held_back": self.held_back[body.name]}
                 for k, body in enumerate(self.model.bodies)}

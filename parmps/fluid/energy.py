@@ -6,6 +6,10 @@ outlet or moving wall paid for is a numerical source. Each fluid particle stands
 mass ``rho l0^d``; the potential energy is measured from a datum, the point of the initial
 fluid lowest along gravity, so a still column's energy is its own and a 1 % rise means 1 %
 of what the flow has to spend.
+
+Along a periodic axis a body force has no potential (a particle that goes round the
+period comes back lower): there its power, ``sum m g.u``, is integrated over the steps
+and counted with the work done on the fluid.
 """
 
 import numpy as np
@@ -29,6 +33,26 @@ def fluid_energy(particles, mass, gravity, datum, mask=None):
         mask = particles.kind[:n] == FLUID
     return particle_energy(particles.velocity[:n][mask], particles.position[:n][mask],
                            mass, gravity, datum)
+
+
+def split_body_force(gravity, periodic):
+    """``(gravity with a potential, the rest)``: the components along the ``periodic`` axes
+    go to the second, which is None when it is zero."""
+    gravity = np.asarray(gravity, dtype=float)
+    drive = np.zeros_like(gravity)
+    drive[list(periodic)] = gravity[list(periodic)]
+    if not np.any(drive):
+        return gravity, None
+    return gravity - drive, drive
+
+
+def body_force_power(particles, mass, force, mask=None):
+    """This rank's power ``sum m f.u`` of the body force ``force`` on its owned fluid (or
+    the owned particles ``mask`` selects); not reduced over the ranks."""
+    n = particles.n_owned
+    if mask is None:
+        mask = particles.kind[:n] == FLUID
+    return mass * float(np.sum(particles.velocity[:n][mask] @ force))
 
 
 def budget(row):

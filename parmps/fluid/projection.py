@@ -18,6 +18,7 @@ from parmps.core.neighbours import pair_list, rows_near
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
 from parmps.fluid.constants import MPSConstants
+from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
                                   scheme_class)
 from parmps.fluid.viscous import ImplicitViscosity
@@ -171,6 +172,8 @@ class FluidSolver:
         self.shifting = scheme_class(SHIFTINGS, mps["shifting"])(mps[mps["shifting"]],
                                                                  constants)
         self.gravity = np.asarray(case["physics"]["gravity"], dtype=float)
+        # The domain (its periodic axes), for those that measure across a seam.
+        self.domain = Domain.from_case(case)
         self.surface_threshold = mps["surface_threshold"]
         self.neighbour_threshold = mps["neighbour_threshold"]
         self.compressibility = mps["compressibility"]
@@ -289,13 +292,14 @@ class FluidSolver:
         if c.viscosity > 0.0 and not s.implicit_viscosity:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(s.indptr, s.cols, particles.position,
-                                             particles.velocity, c.re_laplacian, n, moving)
+                                             self._wall_velocity(s), c.re_laplacian, n,
+                                             moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
         if s.implicit_viscosity:
             self._viscous_solve(s, velocity_star)
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
-        self.decomposition.refresh([position_star, velocity_star])
+        self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         if self.collision:
             timers.start("operators")
             change = kernels.collision_change(s.indptr, s.cols, position_star, velocity_star,
@@ -305,7 +309,7 @@ class FluidSolver:
             velocity_star[:n] += change
             position_star[:n] += dt * change
             timers.start("halo")
-            self.decomposition.refresh([position_star, velocity_star])
+            self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         s.position_star, s.velocity_star = position_star, velocity_star
 
     def _viscous_solve(self, s, velocity_star):
@@ -320,12 +324,28 @@ class FluidSolver:
             self.decomposition.refresh(arrays)
             timers.start("viscous")
 
+        known = self._wall_velocity(s)
+        timers.start("viscous")
         self.implicit_viscosity.predict(particles, s.indptr, s.cols, s.cell_order,
-                                        moving_local, velocity_star, s.dt, s.step_number,
-                                        refresh)
+                                        moving_local, velocity_star, known, s.dt,
+                                        s.step_number, refresh)
         self.viscous_iterations = self.implicit_viscosity.last_iterations
         self.viscous_velocity = velocity_star.copy()
         timers.start("operators")
+
+    def _wall_velocity(self, s):
+        """Every local particle's velocity as the viscous term sees it: the walls', dummies'
+        and nodes' extrapolated so the fluid's velocity meets theirs at the wall's surface
+        (no slip), ghosts refreshed."""
+        particles, c = s.particles, self.constants
+        velocity = np.empty_like(particles.velocity)
+        velocity[:s.n] = kernels.no_slip_velocity(
+            s.indptr, s.cols, particles.position, particles.velocity, c.re_laplacian, s.n,
+            self.moving(particles.kind))
+        self.timers.start("halo")
+        self.decomposition.refresh([velocity])
+        self.timers.start("operators")
+        return velocity
 
     def _number_density(self, s):
         """n* at the predicted positions and the free surface it marks."""
@@ -507,7 +527,7 @@ class FluidSolver:
         on_surface = np.zeros(len(particles), np.int8)
         on_surface[:n] = surface & fluid[:n]
         timers.start("halo")
-        self.decomposition.refresh([position, on_surface])
+        self.decomposition.refresh([position, on_surface], positions=(0,))
         timers.start("operators")
         shift = self.shifting.shift(indptr, cols, position, velocity, on_surface.view(bool),
                                     fluid[:n], dt, n)

@@ -11,8 +11,11 @@ What. Each moving particle's predicted velocity solves
 
 the explicit term's Laplacian (its weights, radius and pair list at the start of the
 step), with the unknowns the moving (fluid and inflow) particles of every rank and the
-others (walls, dummies, bodies' nodes) known at their velocity: a fixed wall is no-slip,
-a moving one drags the fluid at its own. A free-surface particle keeps its row with the
+others (walls, dummies, bodies' nodes) known at the values the explicit term gives them:
+``2 u_i - <u>_i``, the no-slip extrapolation across the wall's surface
+(:func:`parmps.core.kernels.no_slip_velocity`), taken from u^n (lagged: with the walls moving
+together it can make no velocity grow, as the matrix is an M-matrix and the extrapolation
+of u - U_w is at most its largest value). A free-surface particle keeps its row with the
 neighbours it has (no Dirichlet row: the stress-free surface of MPS). One matrix serves
 every velocity component, ``(1/(dt nu) + 2d/(lambda0 n0) sum_j w_ij) u_i -
 2d/(lambda0 n0) sum_(j moving) w_ij u_j``: symmetric, strictly diagonally dominant
@@ -69,12 +72,14 @@ class ImplicitViscosity:
         return self.solver
 
     def predict(self, particles, indptr, cols, cell_order, moving_local, explicit_velocity,
-                dt, step, refresh):
+                known_velocity, dt, step, refresh):
         """The owned moving particles' u* in place in ``explicit_velocity`` (every local
         particle's; the moving ones hold u^n + dt g, the others their velocity), then the
         ghosts refreshed (``refresh``: the decomposition's). ``indptr``/``cols``: the step's
         pair list at ``particles.position``; ``cell_order``: its cell order of the local
-        particles; ``moving_local``: every local particle that moves."""
+        particles; ``moving_local``: every local particle that moves; ``known_velocity``:
+        every local particle's velocity as the viscous term sees it (only the particles that
+        do not move are read: the walls' no-slip values)."""
         c, n = self.constants, particles.n_owned
         solver = self._solver()
         # The rows: the owned moving particles, in the search's cell order (their columns
@@ -90,7 +95,7 @@ class ImplicitViscosity:
                               1.0 / (dt * c.viscosity), order, index_dtype=solver.index_dtype)
         # The known neighbours' share of the Laplacian goes to the right-hand side: the sum
         # over a field that is 0 on the moving particles is sum_(j known) w_ij u_j.
-        known = np.where(moving_local[:, None], 0.0, particles.velocity)
+        known = np.where(moving_local[:, None], 0.0, known_velocity)
         known_sum = kernels.vector_laplacian_sum(indptr, cols, particles.position, known,
                                                  c.re_laplacian, n, moving_local[:n])
         guess = explicit_velocity[order]

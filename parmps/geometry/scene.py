@@ -10,10 +10,11 @@ surface it models, as the fluid's first layer lies half a spacing inside.
 import numpy as np
 from scipy.spatial import cKDTree
 
-from parmps.core.geometry import format_point, outside_box
+from parmps.core.geometry import format_point
 from parmps.core.neighbours import close_pairs
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
 from parmps.errors import CaseError
+from parmps.geometry.domain import Domain
 from parmps.geometry.walls import fluid_particles, surface_of, wall_particles
 
 # Coordinates that should land on the lattice may be off by rounding only.
@@ -64,8 +65,9 @@ def fluid_block(block, spacing, name, case=None, walls=None):
     """A box of the lattice ``lower + (i + 1/2) l0``, or the inside of a mesh or shape on
     the case's lattice (parmps.geometry.walls), less what the walls of any shape take."""
     if block.get("shape") or block.get("mesh"):
-        position = fluid_particles(name, block, surface_of(name, block, domain_box(case)),
-                                   case["particles"]["origin"], spacing)
+        domain = Domain.from_case(case)
+        position = fluid_particles(name, block, surface_of(name, block, domain),
+                                   case["particles"]["origin"], spacing, domain)
         position = clear_of_walls(position, walls, case, spacing, every_wall=True)
     else:
         position, _ = _lattice(block["lower"], _counts(name, block, spacing), spacing)
@@ -75,9 +77,6 @@ def fluid_block(block, spacing, name, case=None, walls=None):
     return position, np.full(len(position), FLUID, np.int8), velocity
 
 
-def domain_box(case):
-    """The domain's (lower, upper) corners."""
-    return case["domain"]["lower"], case["domain"]["upper"]
 
 
 def build_walls(case, spacing):
@@ -86,17 +85,20 @@ def build_walls(case, spacing):
     within half a spacing of an earlier wall's particles (the earlier one stands there, a
     wall particle if either was)."""
     walls = {}
-    for section, builder in (("tank", tank), ("wall_box", wall_box)):
-        for k, spec in enumerate(case[section]):
-            name = f"{section}[{k}]"
-            walls[name] = (*builder(spec, spacing, name), None)
+    domain = Domain.from_case(case)
+    for k, spec in enumerate(case["tank"]):
+        name = f"tank[{k}]"
+        walls[name] = (*tank(spec, spacing, name, open_axes(spec, domain, spacing)), None)
+    for k, spec in enumerate(case["wall_box"]):
+        name = f"wall_box[{k}]"
+        walls[name] = (*wall_box(spec, spacing, name), None)
     for k, spec in enumerate(case.get("wall", ())):
         name = f"wall[{k}]"
         label = f"{name} '{spec['name']}'" if spec["name"] else name
-        surface = surface_of(label, spec, domain_box(case))
+        surface = surface_of(label, spec, domain)
         position, kind, velocity, side = wall_particles(label, spec, surface,
                                                         case["particles"]["origin"], spacing,
-                                                        domain_box(case))
+                                                        domain)
         if walls:
             earlier = np.concatenate([w[0] for w in walls.values()])
             distance, nearest = cKDTree(earlier).query(position, distance_upper_bound=
@@ -163,14 +165,26 @@ def _too_close(position, points, origin, spacing):
     return close
 
 
-def tank(spec, spacing, name):
+def open_axes(spec, domain, spacing):
+    """The periodic axes along which a tank's inner box spans the whole period: it has no
+    walls across them (its floor and sides continue through the seam instead)."""
+    return tuple(a for a in domain.periodic
+                 if domain.spans(spec["lower"], spec["upper"], a, 1e-6 * spacing))
+
+
+def tank(spec, spacing, name, open_axes=()):
     """Walls on every side of the inner box but the top (the last axis's upper side)
-    when ``open_top``: a floor and side walls, with dummy layers behind them."""
+    when ``open_top`` and the sides across ``open_axes`` (periodic axes it spans): a
+    floor and side walls, with dummy layers behind them."""
     counts = _counts(name, spec, spacing)
     layers = spec["wall_layers"] + spec["dummy_layers"]
-    top = counts[-1] + (0 if spec["open_top"] else layers)
-    position, index = _lattice(spec["lower"], [n + 2 * layers for n in counts[:-1]]
-                               + [top + layers], spacing, first=[-layers] * len(counts))
+    below = [0 if a in open_axes else layers for a in range(len(counts))]
+    above = list(below)
+    if spec["open_top"]:
+        above[-1] = 0
+    position, index = _lattice(spec["lower"], [n + b + a for n, b, a in
+                                               zip(counts, below, above)],
+                               spacing, first=[-b for b in below])
     # Distance in layers from the inner box (Chebyshev), 0 inside it.
     beyond = [np.maximum(-index[:, a], index[:, a] - (n - 1)) for a, n in enumerate(counts)]
     if spec["open_top"]:
@@ -179,6 +193,35 @@ def tank(spec, spacing, name):
     keep = depth > 0
     kind = np.where(depth[keep] <= spec["wall_layers"], WALL, DUMMY).astype(np.int8)
     return position[keep], kind, np.zeros((int(keep.sum()), len(counts)))
+
+
+def tank_material(spec, spacing, domain, shift=0.0):
+    """The material of a tank's walls as boxes ``(lower, upper, (axis, side))``: its sides
+    along every axis but the periodic ones it spans (:func:`open_axes`), the top only when
+    closed; each as thick as its wall and dummy layers, ``shift`` the tank's travel."""
+    inner_lower = np.add(spec["lower"], shift)
+    inner_upper = np.add(spec["upper"], shift)
+    thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
+    d = len(inner_lower)
+    walled = [a for a in range(d) if a not in open_axes(spec, domain, spacing)]
+    outer_lower, outer_upper = inner_lower.copy(), inner_upper.copy()
+    outer_lower[walled] -= thick
+    outer_upper[walled] += thick
+    if spec["open_top"]:
+        outer_upper[-1] = inner_upper[-1]
+    boxes = []
+    for axis in walled:
+        for side in (0, 1):
+            if side == 1 and axis == d - 1 and spec["open_top"]:
+                continue
+            lower, upper = outer_lower.copy(), outer_upper.copy()
+            if side == 0:
+                upper[axis] = inner_lower[axis]
+            else:
+                lower[axis] = inner_upper[axis]
+                upper[axis] = inner_upper[axis] + thick
+            boxes.append((lower, upper, (axis, side)))
+    return boxes
 
 
 def wall_box(spec, spacing, name):
@@ -221,7 +264,7 @@ def build(case, solids=None, open_boundaries=None):
         position, kind, velocity = fluid_block(spec, spacing, name, case, walls)
         if solids is not None:
             # A closed shell's nodes take the place of the water at its surface.
-            keep = ~solids.displaces(position, spacing)
+            keep = ~solids.displaces(position, spacing, Domain.from_case(case))
             position, kind, velocity = position[keep], kind[keep], velocity[keep]
         add(name, position, kind, velocity)
     for name, (position, kind, velocity, _) in walls.items():
@@ -250,15 +293,17 @@ def build(case, solids=None, open_boundaries=None):
         "node": np.concatenate(node_index),
     })
     origin = np.concatenate(origin)
+    # A body given across a periodic seam: its node particles inside the period.
+    particles.position[:] = Domain.from_case(case).wrapped(particles.position)
     check_inside_domain(case, particles, origin, sources)
     check_overlaps(particles, origin, sources, spacing)
     return particles, origin, sources
 
 
 def check_inside_domain(case, particles, origin, sources):
-    lower = np.asarray(case["domain"]["lower"])
-    upper = np.asarray(case["domain"]["upper"])
-    outside = outside_box(particles.position, lower, upper)
+    domain = Domain.from_case(case)
+    lower, upper = domain.lower, domain.upper
+    outside = domain.outside(particles.position)
     if outside.any():
         first = int(np.flatnonzero(outside)[0])
         raise CaseError(f"{sources[origin[first]]} puts {int(outside.sum())} particles outside "

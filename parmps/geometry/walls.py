@@ -21,6 +21,7 @@ import numpy as np
 
 from parmps.core.geometry import format_point
 from parmps.core.particles import DUMMY, WALL
+from parmps.geometry.domain import Domain
 from parmps.errors import CaseError
 from parmps.geometry.surfaces import Box, Cylinder, LatticeBlock, MeshSurface, Sphere
 
@@ -89,7 +90,7 @@ def shape_bounds(spec):
 def surface_of(label, spec, domain):
     """The surface of a ``[[wall]]`` or shaped ``[[fluid_block]]``: a primitive, or the
     checked closed mesh of its file."""
-    dimension = len(domain[0])
+    dimension = domain.dimension
     if spec["shape"] == "sphere":
         return Sphere(spec["center"], spec["radius"])
     if spec["shape"] == "cylinder":
@@ -118,11 +119,13 @@ def _mesh_surface(label, spec, dimension, domain):
 
 
 def check_inside_domain(source, vertices, domain):
-    """Refuse a mesh whose bounding box leaves the domain, saying both boxes (and the
+    """Refuse a mesh whose bounding box leaves the domain along an axis that is not
+    periodic (along a periodic one it is cut at the faces), saying both boxes (and the
     likely cause when the sizes differ by a unit's factor)."""
-    lower, upper = (np.asarray(c, dtype=float) for c in domain)
+    lower, upper = domain.lower, domain.upper
     low, high = vertices.min(axis=0), vertices.max(axis=0)
-    if np.all(low >= lower) and np.all(high <= upper):
+    bounded = [a for a in range(domain.dimension) if a not in domain.periodic]
+    if np.all(low[bounded] >= lower[bounded]) and np.all(high[bounded] <= upper[bounded]):
         return
     ratio = float(np.ptp(vertices, axis=0).max() / (upper - lower).max())
     hint = ""
@@ -150,13 +153,25 @@ def wall_particles(label, spec, surface, origin, spacing, domain):
     position = lattice.points(band)
     kind = np.where(lattice.values(into, band) <= spec["wall_layers"] * spacing
                     * (1.0 + _TOLERANCE), WALL, DUMMY).astype(np.int8)
+    # Along a periodic axis the wall is cut at the faces: its images continue it.
+    within = in_period(position, domain)
+    position, kind = position[within], kind[within]
     _check_room(label, spec, position, domain, spacing)
     return position, kind, np.zeros_like(position), Side(spec, surface, lattice, signed)
 
 
+def in_period(position, domain):
+    """Which rows of ``position`` lie in [lower, upper) along every periodic axis."""
+    keep = np.ones(len(position), bool)
+    for axis in domain.periodic:
+        keep &= (position[:, axis] >= domain.lower[axis]) & \
+                (position[:, axis] < domain.upper[axis])
+    return keep
+
+
 def _check_room(label, spec, position, domain, spacing):
-    lower, upper = (np.asarray(c, dtype=float) for c in domain)
-    outside = np.any((position < lower) | (position > upper), axis=1)
+    lower, upper = domain.lower, domain.upper
+    outside = domain.outside(position)
     if outside.any():
         first = position[np.flatnonzero(outside)[0]]
         layers = spec["wall_layers"] + spec["dummy_layers"]
@@ -168,16 +183,17 @@ def _check_room(label, spec, position, domain, spacing):
             f"{format_point(first)}; enlarge domain.lower/domain.upper or move the wall")
 
 
-def fluid_particles(label, spec, surface, origin, spacing):
+def fluid_particles(label, spec, surface, origin, spacing, domain):
     """The lattice points inside the surface of a shaped ``[[fluid_block]]``, clipped to
-    its lower/upper when given; (n, d)."""
+    its lower/upper when given and to the period along a periodic axis; (n, d)."""
     low, high = surface.bounds()
     if spec["lower"] is not None:
         low, high = np.maximum(low, spec["lower"]), np.minimum(high, spec["upper"])
     lattice = LatticeBlock.covering(origin, spacing, low, high)
     if min(lattice.shape, default=0) == 0:
         raise CaseError(f"{label}: its lower/upper leave no part of its shape to fill")
-    return lattice.points(surface.lattice_distance(lattice, 0.0) < 0.0)
+    position = lattice.points(surface.lattice_distance(lattice, 0.0) < 0.0)
+    return position[in_period(position, domain)]
 
 
 class Side:
@@ -225,7 +241,7 @@ def probed_walls(case):
     for k, spec in enumerate(case["wall"]):
         if spec["name"] in wanted:
             label = f"wall[{k}] '{spec['name']}'"
-            surface = surface_of(label, spec, (case["domain"]["lower"], case["domain"]["upper"]))
+            surface = surface_of(label, spec, Domain.from_case(case))
             points, weights, outward = surface.samples(0.5 * case["particles"]["spacing"])
             into = outward if spec["fluid"] == "outside" else -outward
             out[spec["name"]] = (points, weights, into)
@@ -242,7 +258,7 @@ class MaterialDepth:
 
     def __init__(self, case):
         spacing = case["particles"]["spacing"]
-        domain = (case["domain"]["lower"], case["domain"]["upper"])
+        domain = Domain.from_case(case)
         self.walls = []
         for k, spec in enumerate(case.get("wall", ())):
             label = f"wall[{k}] '{spec['name']}'" if spec["name"] else f"wall[{k}]"

@@ -13,6 +13,7 @@ import os
 
 import numpy as np
 
+from parmps.core.particles import Particles
 from parmps.io.xdmf import write_xdmf
 
 FRAME_FIELDS = ("id", "kind", "position", "velocity", "pressure", "number_density")
@@ -22,8 +23,11 @@ FRAME_ATTRIBUTES = ("time", "step", "dt")
 class FrameWriter:
     """Writes frames into a :class:`~parmps.io.result.ResultFile` and keeps its XDMF current."""
 
-    def __init__(self, result, dimension=2, solids=None):
+    def __init__(self, result, dimension=2, solids=None, domain=None):
         self.result = result
+        # Along a periodic axis a particle may stray past a face until it migrates: the
+        # frames show it where it is, inside the domain.
+        self.domain = domain if domain is not None and domain.is_periodic else None
         self.comm = result.comm
         self.dimension = dimension
         self.solids = solids
@@ -72,6 +76,11 @@ class FrameWriter:
         group.attrs["time"] = time
         group.attrs["step"] = step
         group.attrs["dt"] = dt
+        if self.domain is not None:
+            n = particles.n_owned
+            arrays = {name: array[:n] for name, array in particles.arrays.items()}
+            arrays["position"] = self.domain.wrapped(arrays["position"])
+            particles = Particles(arrays, n_owned=n, dimension=particles.dimension)
         total = write_by_id(group, particles, FRAME_FIELDS, self.comm)
         if self.solids is not None:
             solids = group.create_group("solids")

@@ -21,8 +21,10 @@ Contract shared by every implementation:
 - ``build_halo(particles)``: owned particles followed by ghosts (copies of the
   particles of other ranks within the halo width of this rank's region); it
   remembers what it sent, so ``refresh`` updates the same ghosts.
-- ``refresh(arrays)``: the owners' current values of per-particle arrays
-  (length n_owned + n_ghost) copied into the ghost slots, in place.
+- ``refresh(arrays, positions=())``: the owners' current values of per-particle arrays
+  (length n_owned + n_ghost) copied into the ghost slots, in place; the arrays
+  ``positions`` (indices into ``arrays``) hold positions, which a periodic image gets
+  shifted by the period.
 - ``rebalance(particles, step)``: move region boundaries when the load is
   uneven (or heading there); returns owned-only Particles.
 - ``owner(position)``: the owning rank of each row of an (n, d) array of
@@ -31,6 +33,11 @@ Contract shared by every implementation:
 - ``neighbours``: the ranks this rank exchanges ghosts with (local).
 - ``update(particles, step, eager=False)``: migrate, rebalance, build the halo, in
   that order.
+
+Along the domain's periodic axes (``domain.periodic``) the base class wraps the particles
+that left through a face (in ``migrate``) and appends, after the decomposition's own
+ghosts, the periodic images (:mod:`parmps.parallel.periodic`): an implementation knows
+nothing of periodicity beyond its boxes, which tile all of space.
 
 Global ids never change and owned particles are kept in ascending id, so the
 results do not depend on the decomposition or the rank count beyond round-off.
@@ -44,8 +51,11 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps.core.particles import DUMMY, KIND_NAMES, WALL
+from parmps.core.particles import FIELDS, Particles
 from parmps.core.settings import search_radius
-from parmps.parallel.exchange import imbalance_of, sorted_by_id
+from parmps.geometry.domain import Domain
+from parmps.parallel.exchange import field_arrays, imbalance_of, sorted_by_id
+from parmps.parallel.periodic import PeriodicImages
 
 # The package's logger: rank 0's line says which decomposition runs.
 log = logging.getLogger("parmps.parallel")
@@ -69,15 +79,19 @@ class Decomposition(abc.ABC):
         self.rank = comm.rank
         spacing = float(case["particles"]["spacing"])
         self.spacing = spacing
-        self.lower = np.asarray(case["domain"]["lower"], dtype=np.float64)
-        self.upper = np.asarray(case["domain"]["upper"], dtype=np.float64)
-        self.dimension = len(self.lower)
+        self.domain = Domain.from_case(case)
+        self.lower, self.upper = self.domain.lower, self.domain.upper
+        self.dimension = self.domain.dimension
         parallel = case["parallel"]
         self.reach = search_radius(case)
         self.margin = float(parallel.get("migration_margin", 0.0)) * spacing
         # Owned particles stray up to the margin out of their region, and see up to
         # the reach: ghosts come from within reach + margin of the region.
         self.halo_width = self.reach + self.margin
+        self.images = None
+        if self.domain.is_periodic:
+            self.domain.check_lattice(spacing, case["particles"]["origin"], self.halo_width)
+            self.images = PeriodicImages(comm, self.domain, self.halo_width)
         # Regions at least this wide get their ghosts from adjacent regions only.
         self.min_width = self.reach + 2.0 * self.margin
         # Balance is by work, not count: each particle weighs its kind's cost.
@@ -102,19 +116,74 @@ class Decomposition(abc.ABC):
     def distribute(self, particles):
         """Keep this rank's particles of the global scene (identical on every rank)."""
 
-    @abc.abstractmethod
     def migrate(self, particles, eager=False):
         """Drop ghosts, send owned particles that left to their owners; owned-only, by id.
         Lazily, once one is past the margin; ``eager``: now (collective, so any rank's
-        ``eager`` moves them on every rank)."""
+        ``eager`` moves them on every rank). Along a periodic axis a particle more than
+        the margin past a face (any past it, when ``eager``) is first wrapped."""
+        if self.images is not None:
+            self.images.clear()
+            self.domain.wrap(particles.position[:particles.n_owned],
+                             0.0 if eager else self.margin)
+        return self._timed("migration_seconds", self._migrate, particles, eager)
 
-    @abc.abstractmethod
     def build_halo(self, particles):
-        """Owned particles followed by the ghosts this rank needs."""
+        """Owned particles followed by the ghosts this rank needs: the decomposition's,
+        then the periodic images. Remembers what it sent, for refresh."""
+        return self._timed("halo_seconds", self._halo_with_images, particles)
+
+    def _halo_with_images(self, particles):
+        halo = self._build_halo(particles)
+        if self.images is None:
+            return halo
+        boxes = [self.box(rank) for rank in range(self.size)]
+        return self.images.build(halo, halo.n_owned, boxes)
+
+    def refresh(self, arrays, positions=()):
+        """Copy the owners' values into the ghost slots of ``arrays``, in place: a
+        Particles (all its fields), one array, or a list of arrays, each of length
+        n_owned + n_ghost of the last build_halo. ``positions``: the indices of the
+        arrays that hold positions (a Particles' position field is one), which a periodic
+        image gets shifted. Returns ``arrays``."""
+        if isinstance(arrays, Particles):
+            targets = field_arrays(arrays)
+            positions = (list(FIELDS).index("position"),)
+        elif isinstance(arrays, np.ndarray):
+            targets = [arrays]
+        else:
+            targets = list(arrays)
+        self._timed("halo_seconds", self._refresh_with_images, targets, positions)
+        return arrays
+
+    def _refresh_with_images(self, targets, positions):
+        expected = self._n_owned + self.n_ghost
+        for array in targets:
+            if len(array) != expected:
+                raise ValueError(f"refresh: array of length {len(array)}, expected n_owned + "
+                                 f"n_ghost = {self._n_owned} + {self.n_ghost} = {expected}")
+        if not targets:
+            return
+        self._refresh(targets)
+        if self.images is not None:
+            self.images.refresh(targets, positions)
+
+    @property
+    def n_ghost(self):
+        """Ghosts made by the last build_halo: the decomposition's and the images."""
+        images = self.images.count if self.images is not None else 0
+        return self.n_neighbour_ghost + images
 
     @abc.abstractmethod
-    def refresh(self, arrays):
-        """Copy the owners' values into the ghost slots of ``arrays``, in place."""
+    def _migrate(self, particles, force=False):
+        """migrate's work (untimed, no wrap): owned-only in ascending id."""
+
+    @abc.abstractmethod
+    def _build_halo(self, particles):
+        """Owned particles followed by the ghosts from the neighbouring regions."""
+
+    @abc.abstractmethod
+    def _refresh(self, targets):
+        """The owners' values into the neighbouring regions' ghost slots (lengths checked)."""
 
     @abc.abstractmethod
     def rebalance(self, particles, step):
@@ -136,8 +205,8 @@ class Decomposition(abc.ABC):
 
     @property
     @abc.abstractmethod
-    def n_ghost(self):
-        """Ghosts made by the last build_halo."""
+    def n_neighbour_ghost(self):
+        """Ghosts from the neighbouring regions made by the last build_halo."""
 
     # (name, why) of the choice, set by parallel.create_decomposition.
     choice = None
@@ -212,6 +281,8 @@ class Decomposition(abc.ABC):
         # as the step will (the same answer on every rank: the same particles).
         self._first_check = not np.any(particles.dry[:particles.n_owned])
         self._clear_halo(mine.n_owned)
+        if self.images is not None:
+            self.images.clear()
         return mine, total, imbalance
 
     def _positions(self, position):

@@ -242,11 +242,6 @@ class BlockDecomposition(Decomposition):
 
     # -- migration ------------------------------------------------------------------------------
 
-    def migrate(self, particles, eager=False):
-        """Drop ghosts; send owned particles that left this block to their owners (lazily
-        with a margin, unless ``eager``); owned-only in ascending id."""
-        return self._timed("migration_seconds", self._migrate, particles, eager)
-
     def _migrate(self, particles, force=False):
         n = particles.n_owned
         if self.size == 1:
@@ -290,13 +285,8 @@ class BlockDecomposition(Decomposition):
         self._n_owned = n_owned
 
     @property
-    def n_ghost(self):
+    def n_neighbour_ghost(self):
         return int(sum(self._received))
-
-    def build_halo(self, particles):
-        """Owned particles plus the ghosts within ``halo_width`` of this block, from every
-        neighbour (faces, edges and corners); remembers the send lists for refresh."""
-        return self._timed("halo_seconds", self._build_halo, particles)
 
     def _build_halo(self, particles):
         owned = particles.owned() if particles.n_ghost else particles
@@ -317,7 +307,7 @@ class BlockDecomposition(Decomposition):
         arrays = field_arrays(owned)
         incoming = exchange(self.comm, self._neighbours, [pack(arrays, s) for s in self._send])
         self._received = [len(rows) for rows in incoming]
-        total = n + self.n_ghost
+        total = n + self.n_neighbour_ghost
         combined = {}
         for name, array in zip(FIELDS, arrays):
             out = np.empty((total,) + array.shape[1:], array.dtype)
@@ -332,25 +322,8 @@ class BlockDecomposition(Decomposition):
             unpack_into(rows, targets, start)
             start += len(rows)
 
-    def refresh(self, arrays):
-        """Copy the owners' current values into the ghost slots of each array, in place;
-        ``arrays``: a Particles, one array or a list of arrays. Returns ``arrays``."""
-        if isinstance(arrays, Particles):
-            targets = field_arrays(arrays)
-        elif isinstance(arrays, np.ndarray):
-            targets = [arrays]
-        else:
-            targets = list(arrays)
-        self._timed("halo_seconds", self._refresh, targets)
-        return arrays
-
     def _refresh(self, targets):
-        expected = self._n_owned + self.n_ghost
-        for array in targets:
-            if len(array) != expected:
-                raise ValueError(f"refresh: array of length {len(array)}, expected n_owned + "
-                                 f"n_ghost = {self._n_owned} + {self.n_ghost} = {expected}")
-        if self.size == 1 or not targets or not self._neighbours:
+        if self.size == 1 or not self._neighbours:
             return
         # The ghost counts are known since build_halo: one round of messages.
         incoming = exchange(self.comm, self._neighbours, [pack(targets, s) for s in self._send],

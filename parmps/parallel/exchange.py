@@ -126,16 +126,24 @@ def send_to_ranks(particles, destination, comm):
     arrays = field_arrays(particles)
     order = np.argsort(destination, kind="stable")
     buffer = pack(arrays, order)
-    row = buffer.shape[1]
     send_counts = np.bincount(destination, minlength=comm.size).astype(np.int64)
     recv_counts = np.empty(comm.size, np.int64)
     comm.Alltoall(send_counts, recv_counts)
+    received = alltoallv_rows(comm, buffer, send_counts, recv_counts)
+    return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
+
+
+def alltoallv_rows(comm, buffer, send_counts, recv_counts):
+    """Packed rows ``buffer`` (grouped by destination rank, ``send_counts`` of each) sent in
+    one all-to-all; returns the rows received, ``recv_counts`` from each rank in rank order."""
+    row = buffer.shape[1]
     received = np.empty((int(recv_counts.sum()), row), np.uint8)
     send_bytes = send_counts * row
     recv_bytes = recv_counts * row
-    comm.Alltoallv([buffer, (send_bytes, _displacements(send_bytes)), MPI.BYTE],
+    comm.Alltoallv([np.ascontiguousarray(buffer), (send_bytes, _displacements(send_bytes)),
+                    MPI.BYTE],
                    [received, (recv_bytes, _displacements(recv_bytes)), MPI.BYTE])
-    return Particles(dict(zip(FIELDS, unpack_new(received, arrays))))
+    return received
 
 
 def imbalance_of(counts):

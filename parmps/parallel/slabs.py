@@ -183,20 +183,6 @@ class SlabDecomposition(Decomposition):
 
     # -- migration ------------------------------------------------------------------------------
 
-    def migrate(self, particles, eager=False):
-        """Drop ghosts; send owned particles that left this slab to their owners.
-
-        With a migration margin, nothing moves until some particle on some rank
-        is more than the margin outside its slab (or ``eager``); then every particle
-        outside its slab moves. Handles jumps over any number of slabs. Returns
-        owned-only Particles in ascending global id.
-        """
-        start = time.perf_counter()
-        try:
-            return self._migrate(particles, force=eager)
-        finally:
-            self.migration_seconds += time.perf_counter() - start
-
     def _migrate(self, particles, force=False):
         n = particles.n_owned
         if self.size == 1:
@@ -275,17 +261,6 @@ class SlabDecomposition(Decomposition):
         self._n_from_left = self._n_from_right = 0
         self._n_owned = n_owned
 
-    def build_halo(self, particles):
-        """Owned particles plus ghosts from the neighbours within ``halo_width`` of the edges.
-
-        Remembers the send lists so :meth:`refresh` can update the same ghosts.
-        """
-        start = time.perf_counter()
-        try:
-            return self._build_halo(particles)
-        finally:
-            self.halo_seconds += time.perf_counter() - start
-
     def _build_halo(self, particles):
         owned = particles.owned() if particles.n_ghost else particles
         n = owned.n_owned
@@ -316,38 +291,12 @@ class SlabDecomposition(Decomposition):
         return Particles(combined, n_owned=n)
 
     @property
-    def n_ghost(self):
-        """Ghosts made by the last build_halo."""
+    def n_neighbour_ghost(self):
+        """Ghosts from the adjacent slabs made by the last build_halo."""
         return self._n_from_left + self._n_from_right
 
-    def refresh(self, arrays):
-        """Copy the owners' current values into the ghost slots of each array, in place.
-
-        ``arrays``: a Particles (all its fields), one array, or a list/tuple of
-        arrays, each of length n_owned + n_ghost of the last :meth:`build_halo`,
-        of any dtype and trailing shape. All arrays travel in one message per
-        direction. Returns ``arrays``.
-        """
-        start = time.perf_counter()
-        try:
-            if isinstance(arrays, Particles):
-                targets = field_arrays(arrays)
-            elif isinstance(arrays, np.ndarray):
-                targets = [arrays]
-            else:
-                targets = list(arrays)
-            self._refresh(targets)
-            return arrays
-        finally:
-            self.halo_seconds += time.perf_counter() - start
-
     def _refresh(self, targets):
-        expected = self._n_owned + self.n_ghost
-        for array in targets:
-            if len(array) != expected:
-                raise ValueError(f"refresh: array of length {len(array)}, expected n_owned + "
-                                 f"n_ghost = {self._n_owned} + {self.n_ghost} = {expected}")
-        if self.size == 1 or not targets:
+        if self.size == 1:
             return
         # The ghost counts are known since build_halo: one round of messages.
         from_left, from_right = self._exchange(pack(targets, self._send_left),

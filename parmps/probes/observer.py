@@ -46,7 +46,8 @@ class Probe:
         self.kind = spec["kind"]
         self.spec = spec
         self.dimension = dimension
-        self.radius = spec["radius"] * spacing
+        # A solid-only case has no spacing: its probes read nodes only.
+        self.radius = spec["radius"] * spacing if spacing is not None else 0.0
         self.full_sum = lattice_sum(spec["radius"], dimension)
         # The depth integrates the fill: its mean over the water must be 1, not its peak.
         self.mean_sum = mean_sum(spec["radius"], dimension)
@@ -178,11 +179,13 @@ class Probes(Observer):
     name = "probes"
 
     def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=(),
-                 dimension=2, boxes=(), walls=None):
+                 dimension=2, boxes=(), walls=None, domain=None):
         """``bodies``: the case's [[body]] tables (a displacement probe's rest positions);
         ``boxes``: the case's wall boxes as ``(lower, upper)`` (a force probe on one);
-        ``walls``: the named walls' surface samples (see :class:`Probe`)."""
+        ``walls``: the named walls' surface samples (see :class:`Probe`); ``domain``: the
+        domain (its periodic axes: a sample beside a seam sees across it)."""
         self.result = result
+        self.domain = domain
         self.comm = result.comm
         self.model = model
         by_name = {spec["name"] or f"body{k}": spec for k, spec in enumerate(bodies)}
@@ -190,6 +193,8 @@ class Probes(Observer):
             spec["nodes"]].mean(axis=0) if spec["kind"] == "displacement" else None, boxes,
             walls)
             for spec in specs]
+        # The widest support: how far beyond a periodic face a sample may look.
+        self.reach = max((p.radius for p in self.probes), default=0.0)
         self.cadences = [SimulatedInterval(p.spec["interval"], end_time)
                          if p.spec["interval"] > 0 else None for p in self.probes]
         self.flush_cadence = SimulatedInterval(flush_interval, end_time)
@@ -244,8 +249,8 @@ class Probes(Observer):
         rows = self._sample_rows(due)
         sums = None
         if rows is not None:
-            p = state.particles
-            sums = kernel_sums(rows, p.position, p.kind, p.pressure, p.n_owned, self.comm)
+            position, kind, pressure, n = self._owned_with_images(state.particles)
+            sums = kernel_sums(rows, position, kind, pressure, n, self.comm)
         bodies = {}
         if self.model is not None:
             bodies = {body.name: body for body in self.model.bodies}
@@ -256,6 +261,20 @@ class Probes(Observer):
             values.append(probe.value(sums[offset:offset + count] if count else None, bodies))
             offset += count
         return values
+
+    def _owned_with_images(self, particles):
+        """(position, kind, pressure, count) of the owned particles, and along a periodic
+        axis their images within a support of a face too: a sample beside the seam sees
+        the particles beyond it (each rank adds its owned ones: nothing counts twice)."""
+        n = particles.n_owned
+        position, kind = particles.position[:n], particles.kind[:n]
+        pressure = particles.pressure[:n]
+        if self.domain is None or not self.domain.is_periodic:
+            return position, kind, pressure, n
+        index, shift = self.domain.images(position, self.reach)
+        return (np.concatenate([position, position[index] + shift]),
+                np.concatenate([kind, kind[index]]),
+                np.concatenate([pressure, pressure[index]]), n + len(index))
 
     def _sample_rows(self, due):
         # One row set per combination of due probes; most runs see one or two.

@@ -34,7 +34,7 @@ import logging
 
 import numpy as np
 
-from parmps.core.geometry import outside_box
+from parmps.geometry.domain import Domain
 from parmps.core.particles import FLUID, KIND_NAMES
 from parmps.errors import RunFailure
 from parmps.run.schedule import WallInterval
@@ -84,8 +84,8 @@ class EscapedFluid:
     def __init__(self, case, comm, initial_fluid, report_seconds=None):
         domain = case["domain"]
         self.comm = comm
-        self.lower = np.asarray(domain["lower"], dtype=float)
-        self.upper = np.asarray(domain["upper"], dtype=float)
+        self.domain = Domain.from_case(case)
+        self.lower, self.upper = self.domain.lower, self.domain.upper
         self.remove = domain["escaped_fluid"] == "remove"
         self.max_fraction = domain["max_escaped_fraction"]
         self.initial_fluid = int(initial_fluid)
@@ -116,7 +116,8 @@ class EscapedFluid:
         thrown out by an unstable step is reported as the instability it is.
         """
         n = particles.n_owned
-        outside = outside_box(particles.position[:n], self.lower, self.upper)
+        # Along a periodic axis nothing is outside: the next update wraps it.
+        outside = self.domain.outside(particles.position[:n])
         fluid = outside & (particles.kind[:n] == FLUID)
         other = outside & ~fluid
         count = int(np.count_nonzero(fluid))

@@ -26,6 +26,8 @@ from parmps.errors import RunFailure
 from parmps.core.geometry import first_box_holding, format_point
 from parmps.core.particles import FLUID
 from parmps.boundaries.walls import travel
+from parmps.geometry.domain import Domain
+from parmps.geometry.scene import tank_material
 
 # Depth behind a wall surface, in spacings, past which a fluid particle has
 # leaked: half a spacing puts its centre on the first wall layer's centre line.
@@ -39,36 +41,21 @@ def wall_rectangles(case, time=0.0):
     """The wall material at ``time`` as boxes ``(lower, upper, name)``, in metres.
 
     A tank gives its side walls (left and right, and in 3D front and back) and its
-    bottom (and top when closed), each as thick as its wall and dummy layers; a
+    bottom (and top when closed), each as thick as its wall and dummy layers, bar those
+    across a periodic axis it spans (:func:`parmps.geometry.scene.tank_material`); a
     wall box is its own box. Moving tanks and boxes (parmps.boundaries.walls) are
     where their motion has taken them.
     """
     spacing = case["particles"]["spacing"]
+    domain = Domain.from_case(case)
     rectangles = []
     for k, spec in enumerate(case.get("tank", ())):
         shift = travel(spec, time)
-        inner_lower = np.add(spec["lower"], shift)
-        inner_upper = np.add(spec["upper"], shift)
-        thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
-        # The walls' outer box: the open top ends at the inner box's top.
-        outer_lower = inner_lower - thick
-        outer_upper = inner_upper + thick
-        if spec["open_top"]:
-            outer_upper[-1] = inner_upper[-1]
-        name = f"tank[{k}]"
-        d = len(inner_lower)
-        sides = [(a, side, f"{name} {SIDE_NAMES[a][side]}")
-                 for a in range(d - 1) for side in (0, 1)]
-        sides.append((d - 1, 0, f"{name} bottom"))
-        if not spec["open_top"]:
-            sides.append((d - 1, 1, f"{name} top"))
-        for axis, side, label in sides:
-            lower, upper = outer_lower.copy(), outer_upper.copy()
-            if side == 0:
-                upper[axis] = inner_lower[axis]
+        for lower, upper, (axis, side) in tank_material(spec, spacing, domain, shift):
+            if axis == len(lower) - 1:
+                label = f"tank[{k}] {('bottom', 'top')[side]}"
             else:
-                lower[axis] = inner_upper[axis]
-                upper[axis] = inner_upper[axis] + thick
+                label = f"tank[{k}] {SIDE_NAMES[axis][side]}"
             rectangles.append((tuple(lower), tuple(upper), label))
     for k, spec in enumerate(case.get("wall_box", ())):
         shift = travel(spec, time)

@@ -14,6 +14,7 @@ import numpy as np
 
 from parmps.core.particles import FLUID, KIND_NAMES, Particles
 from parmps.core.settings import has_fluid
+from parmps.geometry.domain import Domain
 from parmps.io.checkpoint import write_checkpoint
 from parmps.io.frames import FrameWriter
 from parmps.io.result import ResultFile
@@ -151,7 +152,8 @@ class Simulation:
         case = self.case
         interval = case["time"]["output_interval"]
         columns = dict(DRIVER_DIAGNOSTICS, **self.stepper.DIAGNOSTICS)
-        writer = FrameWriter(result, case.get("dimension", 2), self.model)
+        writer = FrameWriter(result, case.get("dimension", 2), self.model,
+                             Domain.from_case(case))
         found = list(extra) + [observing.Diagnostics(result, columns, interval, self.end_time)]
         if self.model is not None:
             found.append(observing.BodySeries(result, self.model, self.coupling, interval,
@@ -163,7 +165,7 @@ class Simulation:
                                 self.model, interval, self.end_time, case["body"],
                                 case["dimension"],
                                 [(box["lower"], box["upper"]) for box in case["wall_box"]],
-                                probed_walls(case)))
+                                probed_walls(case), Domain.from_case(case)))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)

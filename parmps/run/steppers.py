@@ -21,6 +21,7 @@ import logging
 import numpy as np
 
 from parmps.core.geometry import outside_box
+from parmps.geometry.domain import Domain
 from parmps.core.particles import FLUID
 from parmps.errors import RunFailure
 from parmps.fluid import energy
@@ -82,14 +83,17 @@ class FluidStepper:
         self.step_imbalance = 1.0
         constants = fluid.constants
         self.particle_mass = constants.density * constants.spacing ** constants.dimension
-        self.gravity = fluid.gravity
+        # Along a periodic axis gravity has no potential: its work is counted as it is done.
+        self.gravity, self.drive = energy.split_body_force(
+            fluid.gravity, Domain.from_case(case).periodic)
         self.energy_datum = None  # set at the first start, kept by checkpoints
         # The fluid's energy after the first step, and the lowest budget (fluid and bodies
         # less the boundaries' work) since: a rise above it is a numerical source.
         self.initial_energy = None
         self.lowest_budget = None
         # This rank's share of the energy fluid particles brought in when they joined the
-        # fluid (at an inlet) less what they took away (an outlet, escaped fluid) [J].
+        # fluid (at an inlet) less what they took away (an outlet, escaped fluid), and of
+        # the work of the body force along the periodic axes [J].
         self.exchanged_energy = 0.0
 
     def checkpoint_state(self):
@@ -182,7 +186,10 @@ class FluidStepper:
             given = participant.pressure_mobility(particles)
             if given is not None:
                 mobility = given if mobility is None else mobility * given
+        power = self._drive_power(particles)
         self.stats = self.fluid.step(particles, dt, step, dirichlet, mobility)
+        # The trapezoidal rule over the step, as the velocities change within it.
+        self.exchanged_energy += 0.5 * dt * (power + self._drive_power(particles))
         for participant in self.participants:
             if participant.exchanges_fluid:
                 before = sum(self._fluid_energy(particles))
@@ -279,6 +286,12 @@ class FluidStepper:
         if self.initial_energy is None or self.initial_energy == 0.0:
             return 0.0
         return (self.budget - self.lowest_budget) / abs(self.initial_energy)
+
+    def _drive_power(self, particles):
+        """This rank's power of the body force along the periodic axes on its fluid [W]."""
+        if self.drive is None:
+            return 0.0
+        return energy.body_force_power(particles, self.particle_mass, self.drive)
 
     def _fluid_energy(self, particles, mask=None):
         """This rank's (kinetic, potential) energy of its owned fluid."""

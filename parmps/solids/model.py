@@ -60,12 +60,12 @@ class SolidModel:
         with :func:`parmps.core.geometry.inside_boundary`."""
         raise NotImplementedError
 
-    def displaces(self, points, spacing):
+    def displaces(self, points, spacing, domain=None):
         """Which of the fluid's lattice ``points`` (k, d) the bodies take the place of: a
         closed shell's surface stands in for the fluid within its clearance (the fluid on
-        both sides of it stays). Bodies whose nodes sit on the fluid's lattice (a lattice
-        body) displace nothing here: the case leaves their place free, and the scene
-        refuses overlaps."""
+        both sides of it stays), across a periodic seam of ``domain`` too. Bodies whose
+        nodes sit on the fluid's lattice (a lattice body) displace nothing here: the case
+        leaves their place free, and the scene refuses overlaps."""
         return np.zeros(len(points), bool)
 
     def encloses_fluid(self, k):

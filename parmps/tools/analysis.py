@@ -611,10 +611,10 @@ def curve_errors(time, value, t_ref, v_ref):
 
 
 def carried_body(path, case, body="box", check=None):
-    """A body carried by an inflow (validation/box_in_flow_3d/, capsule_3d/), in any
-    dimension: its largest |V - V0|/V0, the most fluid particles inside it at any step and
+    """A body carried by an inflow or a periodic duct's body force (validation/box_in_flow_3d/,
+    capsule_3d/, capsule_periodic_3d/), in any dimension: its largest |V - V0|/V0, the most fluid particles inside it at any step and
     how much that count changed (a shell holds its water: any change is a leak), how far its
-    centroid travelled along the first inlet's velocity (the flow's direction) by the last
+    centroid travelled along the first inlet's velocity (or the body force: the flow's direction) by the last
     step and across it, how far the run got and, with ``check`` (a body_crossing check's
     name), the fluid particles that crossed the body.
 
@@ -624,7 +624,9 @@ def carried_body(path, case, body="box", check=None):
     """
     series = solid_series(path, body)
     centroid = np.asarray(series["centroid"])
-    flow = np.asarray(case["inlet"][0]["velocity"], dtype=float)
+    # The flow's direction: the first inlet's, or in a periodic duct the driving body force's.
+    flow = np.asarray(case["inlet"][0]["velocity"] if case["inlet"]
+                      else case["physics"]["gravity"], dtype=float)
     flow /= np.linalg.norm(flow)
     travel = centroid[-1] - centroid[0]
     along = float(travel @ flow)
@@ -1058,3 +1060,137 @@ def cell_stretch(path, case, reference, body="cell", drift_window=5.0e-4):
             "area_error": float(np.abs(series["area_error"]).max()),
             "volume_error": float(np.abs(series["volume_error"]).max()),
             "wall": float(wall[-1])}
+
+
+# --------------------------------------------------------------------------
+# Plane Poiseuille flow: a periodic channel driven by a body force
+
+def poiseuille_series(y, time, gravity, viscosity, height, terms=200):
+    """The start-up of plane Poiseuille flow from rest between no-slip walls at y = 0 and
+    ``height``, driven by the body force ``gravity`` along the channel: u(y, t) [m/s]."""
+    y = np.asarray(y, dtype=float)
+    steady = gravity * y * (height - y) / (2.0 * viscosity)
+    n = np.arange(1, 2 * terms, 2)[:, None]
+    decay = np.exp(-(n * np.pi) ** 2 * viscosity * time / height ** 2)
+    modes = 4.0 * gravity * height ** 2 / (viscosity * np.pi ** 3 * n ** 3) * \
+        np.sin(n * np.pi * y[None, :] / height) * decay
+    return steady - modes.sum(axis=0)
+
+
+def poiseuille_profile(path, case):
+    """A periodic channel's velocity against :func:`poiseuille_series`, relative to the
+    steady centre-line velocity u_max = g H^2 / (8 nu): ``profile_rms`` (the RMS over the
+    fluid at the last frame), ``transient_rms`` (the largest RMS over the frames) and
+    ``flow_rate`` (the fluid's volume flux over the period against g H^3 / (12 nu), minus
+    one, at the last frame). The walls are the first tank's floor and roof; the body force
+    is gravity's component along the first periodic axis."""
+    from parmps.result import open_result
+    axis = "xyz".index(case["domain"]["periodic"][0])
+    g, nu = case["physics"]["gravity"][axis], case["fluid"]["viscosity"]
+    tank = case["tank"][0]
+    across = len(tank["lower"]) - 1
+    floor, height = tank["lower"][across], tank["upper"][across] - tank["lower"][across]
+    period = case["domain"]["upper"][axis] - case["domain"]["lower"][axis]
+    volume = case["particles"]["spacing"] ** len(tank["lower"])
+    u_max = g * height ** 2 / (8.0 * nu)
+    errors = []
+    with open_result(path) as result:
+        for frame in result.frames[1:]:
+            fluid = frame.kind == 0
+            y = frame.position[fluid, across] - floor
+            u = frame.velocity[fluid, axis]
+            errors.append(float(np.sqrt(np.mean((u - poiseuille_series(
+                y, frame.time, g, nu, height)) ** 2)) / u_max))
+        flux = float(u.sum() * volume / period)
+        if across == 2:  # 3D: per metre of depth across the flow
+            flux /= case["domain"]["upper"][1] - case["domain"]["lower"][1]
+    steady_flux = g * height ** 3 / (12.0 * nu)
+    return {"profile_rms": errors[-1], "transient_rms": max(errors),
+            "flow_rate": flux / steady_flux - 1.0, "u_max": u_max,
+            "end": float(frame.time)}
+
+
+def hagen_poiseuille_series(r, time, gravity, viscosity, radius, terms=100):
+    """The start-up of Hagen-Poiseuille flow from rest in a pipe of ``radius``, driven by the
+    body force ``gravity`` along its axis: u(r, t) [m/s] at distances ``r`` from the axis."""
+    from scipy.special import j0, j1, jn_zeros
+    r = np.asarray(r, dtype=float)
+    steady = gravity * (radius ** 2 - r ** 2) / (4.0 * viscosity)
+    zeros = jn_zeros(0, terms)[:, None]
+    modes = 2.0 * gravity * radius ** 2 / viscosity * j0(zeros * r[None, :] / radius) / \
+        (zeros ** 3 * j1(zeros)) * np.exp(-zeros ** 2 * viscosity * time / radius ** 2)
+    return steady - modes.sum(axis=0)
+
+
+def hagen_poiseuille_profile(path, case, wall="pipe", radius=None):
+    """A periodic pipe's velocity against :func:`hagen_poiseuille_series`, relative to the
+    steady centre-line velocity u_max = g R^2 / (4 nu): ``profile_rms`` (last frame),
+    ``transient_rms`` (the largest over the frames) and ``flow_rate`` (the fluid's volume flux
+    over the period against pi g R^4 / (8 nu), minus one). The axis is the first periodic
+    one; the pipe's radius and centre line are the wall ``wall``'s mesh's (its vertices' mean
+    distance from their centroid's line), or ``radius`` [m]."""
+    from parmps.geometry.mesh import read_mesh
+    from parmps.result import open_result
+    axis = "xyz".index(case["domain"]["periodic"][0])
+    across = [a for a in range(3) if a != axis]
+    g, nu = case["physics"]["gravity"][axis], case["fluid"]["viscosity"]
+    spec = next(w for w in case["wall"] if w["name"] == wall)
+    vertices, _ = read_mesh(spec["mesh"], wall)
+    centre = vertices[:, across].mean(axis=0)
+    if radius is None:
+        radius = float(np.linalg.norm(vertices[:, across] - centre, axis=1).max())
+    period = case["domain"]["upper"][axis] - case["domain"]["lower"][axis]
+    volume = case["particles"]["spacing"] ** 3
+    u_max = g * radius ** 2 / (4.0 * nu)
+    errors = []
+    with open_result(path) as result:
+        for frame in result.frames[1:]:
+            fluid = frame.kind == 0
+            r = np.linalg.norm(frame.position[fluid][:, across] - centre, axis=1)
+            u = frame.velocity[fluid, axis]
+            errors.append(float(np.sqrt(np.mean((u - hagen_poiseuille_series(
+                r, frame.time, g, nu, radius)) ** 2)) / u_max))
+        flux = float(u.sum() * volume / period)
+    steady_flux = np.pi * g * radius ** 4 / (8.0 * nu)
+    return {"profile_rms": errors[-1], "transient_rms": max(errors),
+            "flow_rate": flux / steady_flux - 1.0, "u_max": u_max, "radius": radius,
+            "end": float(frame.time)}
+
+
+# --------------------------------------------------------------------------
+# Turek & Hron (2006): a displacement probe's oscillation against the benchmark's figures
+
+def oscillation(time, value):
+    """(mean, amplitude, frequency) of a periodic series as Turek & Hron report theirs: the
+    mean (max + min)/2 and the amplitude (max - min)/2 over the series, the frequency from
+    its crossings of that mean (NaN with fewer than three)."""
+    time, value = np.asarray(time, dtype=float), np.asarray(value, dtype=float)
+    high, low = float(value.max()), float(value.min())
+    mean = 0.5 * (high + low)
+    crossing = np.flatnonzero((value[:-1] - mean) * (value[1:] - mean) < 0.0)
+    if len(crossing) < 3:
+        return mean, 0.5 * (high - low), float("nan")
+    at = time[crossing] + (mean - value[crossing]) / (value[crossing + 1] - value[crossing]) \
+        * (time[crossing + 1] - time[crossing])
+    return mean, 0.5 * (high - low), float((len(at) - 1) / (2.0 * (at[-1] - at[0])))
+
+
+def flag_oscillation(path, case, probe="A", start=0.0, reference=None):
+    """Point A's displacement (a displacement probe) over t >= ``start`` as the benchmark
+    reports it, in mm and Hz: ``ux_mean``, ``ux_amplitude``, ``uy_mean``, ``uy_amplitude``,
+    ``ux_frequency``, ``uy_frequency``; with ``reference`` (a table of the same names, the
+    benchmark's figures) each one's relative error as ``<name>_error``."""
+    from parmps.result import open_result
+    with open_result(path) as result:
+        series = result.probes[probe]
+        time = np.asarray(series["time"])
+        value = np.asarray(series["value"]) * 1000.0
+    keep = time >= start
+    measured = {"end": float(time[-1])}
+    for k, axis in enumerate("xy"):
+        mean, amplitude, frequency = oscillation(time[keep], value[keep, k])
+        measured.update({f"u{axis}_mean": mean, f"u{axis}_amplitude": amplitude,
+                         f"u{axis}_frequency": frequency})
+    for name, expected in (reference or {}).items():
+        measured[f"{name}_error"] = measured[name] / expected - 1.0
+    return measured

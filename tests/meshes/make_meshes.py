@@ -3,7 +3,10 @@ that the walls and fluid from files are tested on files another tool wrote:
 
 - box.stl: the box [0, 0.2] x [0, 0.1] x [0, 0.1] m, 12 outward triangles (ASCII);
 - cylinder.stl: a cylinder of radius 0.05 m about the vertical line x = y = 0.1 m,
-  z in [0.05, 0.15] m, a 128-sided prism with fans on its ends (ASCII).
+  z in [0.05, 0.15] m, a 128-sided prism with fans on its ends (ASCII);
+- pipe.stl: a pipe of radius 8 mm about the x axis, x in [-8, 20] mm, a 128-sided prism with
+  fans on its ends (binary): the periodic pipe of cases/hagen_poiseuille_3d.toml, whose
+  period [0, 12] mm it overhangs by 8 mm at each end, so its caps lie outside the domain.
 
 Run it from anywhere: python tests/meshes/make_meshes.py
 """
@@ -44,12 +47,21 @@ def cylinder(center, radius, low, high, sides):
     return points, triangles
 
 
+def along_x(points, triangles):
+    """A mesh about the vertical turned to lie along x (z -> x, x -> y, y -> z): a rotation,
+    so its triangles stay outward."""
+    return points[:, [2, 0, 1]], triangles
+
+
 def main():
     for name, (points, triangles) in {
             "box.stl": box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1)),
             "cylinder.stl": cylinder((0.1, 0.1), 0.05, 0.05, 0.15, 128)}.items():
         meshio.write(os.path.join(HERE, name), meshio.Mesh(points, [("triangle", triangles)]),
                      binary=False)
+    points, triangles = along_x(*cylinder((0.0, 0.0), 0.008, -0.008, 0.020, 128))
+    meshio.write(os.path.join(HERE, "pipe.stl"), meshio.Mesh(points, [("triangle", triangles)]),
+                 binary=True)
 
 
 if __name__ == "__main__":

@@ -341,7 +341,10 @@ def _check_placement(label, position, springs, domain):
                         f"{springs[row, 0]} and {springs[row, 1]} coincide")
     if domain is not None:
         lower, upper = np.asarray(domain["lower"]), np.asarray(domain["upper"])
-        outside = outside_box(position, lower, upper)
+        # Along a periodic axis a body may lie across the seam.
+        bounded = [a for a in range(len(lower))
+                   if "xyz"[a] not in domain.get("periodic", ())]
+        outside = outside_box(position[:, bounded], lower[bounded], upper[bounded])
         if outside.any():
             at = ", ".join(f"{x:.6g}" for x in position[np.flatnonzero(outside)[0]])
             raise CaseError(f"{label} has {int(outside.sum())} nodes outside the domain, "

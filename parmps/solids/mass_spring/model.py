@@ -166,11 +166,13 @@ class MassSpringModel(SolidModel):
         body = self.bodies[k]
         return body.position, boundary_facets(body.outline)
 
-    def displaces(self, points, spacing):
+    def displaces(self, points, spacing, domain=None):
         taken = np.zeros(len(points), bool)
         for body in self.bodies:
             if body.encloses_fluid:
-                taken |= displaced_by_shell(points, body.position, body.facets, spacing)
+                seen = points if domain is None else domain.near(points,
+                                                                 body.position.mean(axis=0))
+                taken |= displaced_by_shell(seen, body.position, body.facets, spacing)
         return taken
 
     def encloses_fluid(self, k):
