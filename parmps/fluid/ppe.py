@@ -347,7 +347,7 @@ class PressureSolver:
             self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
             self.setup_cost, self.reuse_limit)
 
-    def solve(self, owned, other, rhs, guess, step, ids):
+    def solve(self, owned, other, rhs, guess, step, ids, extra=None):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
         ``owned``, ``other``: the rows' two CSR blocks, each (row pointers, columns,
@@ -357,10 +357,15 @@ class PressureSolver:
         preconditioner kept from an earlier layout of the rows finds them.
         ``rhs`` and ``guess`` of shape (rows, k): k systems of the one matrix (the velocity
         components of the implicit viscosity), solved one after the other; p is then
-        (rows, k), the iterations their sum and the residual the largest.
+        (rows, k), the iterations their sum and the residual the largest. ``extra``: None,
+        or a symmetric PETSc matrix of the same rows added to A (the implicit viscosity's
+        no-slip walls).
         """
         PETSc = self.PETSc
         matrix, csr = pressure_matrix(PETSc, self.comm, owned, other)
+        if extra is not None:
+            matrix.axpy(1.0, extra, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
         ids = np.asarray(ids)

@@ -324,11 +324,9 @@ class FluidSolver:
             self.decomposition.refresh(arrays)
             timers.start("viscous")
 
-        known = self._wall_velocity(s)
-        timers.start("viscous")
         self.implicit_viscosity.predict(particles, s.indptr, s.cols, s.cell_order,
-                                        moving_local, velocity_star, known, s.dt,
-                                        s.step_number, refresh)
+                                        moving_local, velocity_star, s.dt, s.step_number,
+                                        refresh)
         self.viscous_iterations = self.implicit_viscosity.last_iterations
         self.viscous_velocity = velocity_star.copy()
         timers.start("operators")

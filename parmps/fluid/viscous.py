@@ -72,38 +72,90 @@ class ImplicitViscosity:
         return self.solver
 
     def predict(self, particles, indptr, cols, cell_order, moving_local, explicit_velocity,
-                known_velocity, dt, step, refresh):
+                dt, step, refresh, no_slip=True):
         """The owned moving particles' u* in place in ``explicit_velocity`` (every local
         particle's; the moving ones hold u^n + dt g, the others their velocity), then the
         ghosts refreshed (``refresh``: the decomposition's). ``indptr``/``cols``: the step's
         pair list at ``particles.position``; ``cell_order``: its cell order of the local
-        particles; ``moving_local``: every local particle that moves; ``known_velocity``:
-        every local particle's velocity as the viscous term sees it (only the particles that
-        do not move are read: the walls' no-slip values)."""
+        particles; ``moving_local``: every local particle that moves. ``no_slip``: the walls
+        extrapolated (the step's viscous term), or taken at their own velocity (False)."""
         c, n = self.constants, particles.n_owned
         solver = self._solver()
         # The rows: the owned moving particles, in the search's cell order (their columns
-        # nearly ascending). Every other particle is a known neighbour, row number 0 (a
-        # row number >= 0 puts its weight on the diagonal; only unknowns are columns).
+        # nearly ascending). Every other particle is a known neighbour with the rank's first
+        # row as its number: a row number >= 0 puts its weight on the diagonal, only unknowns
+        # are columns, and the rank's row numbers keep their range (the rows' room).
         owned = cell_order[cell_order < n]
         order = owned[moving_local[owned]]
-        row_number = np.zeros(len(particles), np.int64)
-        row_number[order] = (self.comm.exscan(len(order)) or 0) + np.arange(len(order))
+        first = self.comm.exscan(len(order)) or 0
+        row_number = np.full(len(particles), first, np.int64)
+        row_number[order] = first + np.arange(len(order))
         is_unknown = moving_local.astype(np.int8)
         refresh([row_number, is_unknown])
         rows = self.rows.rows(indptr, cols, particles.position, row_number, is_unknown,
                               1.0 / (dt * c.viscosity), order, index_dtype=solver.index_dtype)
+        known, coupling = particles.velocity.copy(), None
+        if no_slip:
+            known[:n], coupling = self._walls(particles, indptr, cols, moving_local,
+                                              row_number, len(order), solver.PETSc)
+            refresh([known])
         # The known neighbours' share of the Laplacian goes to the right-hand side: the sum
         # over a field that is 0 on the moving particles is sum_(j known) w_ij u_j.
-        known = np.where(moving_local[:, None], 0.0, known_velocity)
+        known[moving_local] = 0.0
         known_sum = kernels.vector_laplacian_sum(indptr, cols, particles.position, known,
                                                  c.re_laplacian, n, moving_local[:n])
         guess = explicit_velocity[order]
         rhs = guess / (dt * c.viscosity) + c.laplacian_coefficient * known_sum[order]
-        solution, self.last_iterations, self.last_residual = solver.solve(
-            rows.owned, rows.other, rhs, guess, step, particles.id[order])
+        try:
+            solution, self.last_iterations, self.last_residual = solver.solve(
+                rows.owned, rows.other, rhs, guess, step, particles.id[order], extra=coupling)
+        finally:
+            if coupling is not None:
+                coupling.destroy()
         explicit_velocity[order] = solution
         refresh([explicit_velocity])
+
+    def _walls(self, particles, indptr, cols, moving_local, row_number, n_rows, PETSc):
+        """The no-slip walls, implicit: a wall, dummy or node j with fluid neighbours carries
+        ``2 U_j - sum_k w_jk u_k / S_j`` (S_j = sum_k w_jk over its fluid neighbours k), the
+        explicit term's extrapolation (:func:`parmps.core.kernels.no_slip_velocity`) of the
+        unknowns themselves. Returns (the owned particles' known part, 2 U_j there and U_j
+        elsewhere; the matrix ``2d/(lambda0 n0) B^T S^-1 B`` the rows gain, B_jk = w_jk:
+        symmetric positive semi-definite, so the system stays symmetric positive definite)."""
+        c, n = self.constants, particles.n_owned
+        i = np.repeat(np.arange(n), np.diff(indptr[:n + 1]))
+        j = np.asarray(cols[:indptr[n]])
+        wall_pair = ~moving_local[i] & moving_local[j]
+        i, j = i[wall_pair], j[wall_pair]
+        distance = np.linalg.norm(particles.position[i] - particles.position[j], axis=1)
+        inside = (distance > 0.0) & (distance < c.re_laplacian)
+        i, j = i[inside], j[inside]
+        w = c.re_laplacian / distance[inside] - 1.0
+        total = np.bincount(i, weights=w, minlength=n)
+        known = particles.velocity[:n].copy()
+        walls = total > 0.0
+        known[walls] *= 2.0
+        # B: one row for each owned wall with fluid neighbours, the fluid's global rows as
+        # columns, ascending in each row (PETSc's CSR on several ranks needs them so).
+        wall_row = np.cumsum(walls) - 1
+        column = row_number[j]
+        ordered = np.lexsort((column, wall_row[i]))
+        i, column, w = i[ordered], column[ordered], w[ordered]
+        row_ptr = np.concatenate([[0], np.cumsum(np.bincount(wall_row[i],
+                                                             minlength=int(walls.sum())))])
+        index = PETSc.IntType
+        B = PETSc.Mat().createAIJ(
+            size=((int(walls.sum()), PETSc.DETERMINE), (n_rows, PETSc.DETERMINE)),
+            csr=(row_ptr.astype(index), column.astype(index), w), comm=self.comm)
+        B.assemble()
+        scaled = B.duplicate(copy=True)
+        scale = scaled.createVecLeft()
+        scale.getArray()[:] = c.laplacian_coefficient / total[walls]
+        scaled.diagonalScale(L=scale)
+        coupling = B.transposeMatMult(scaled)
+        for item in (B, scaled, scale):
+            item.destroy()
+        return known, coupling
 
     def destroy(self):
         if self.solver is not None:
