@@ -11,15 +11,16 @@ What. Each moving particle's predicted velocity solves
 
 the explicit term's Laplacian (its weights, radius and pair list at the start of the
 step), with the unknowns the moving (fluid and inflow) particles of every rank and the
-others (walls, dummies, bodies' nodes) known at the values the explicit term gives them:
-``2 u_i - <u>_i``, the no-slip extrapolation across the wall's surface
-(:func:`parmps.core.kernels.no_slip_velocity`), taken from u^n (lagged: with the walls moving
-together it can make no velocity grow, as the matrix is an M-matrix and the extrapolation
-of u - U_w is at most its largest value). A free-surface particle keeps its row with the
+others (walls, dummies, bodies' nodes) at the values the explicit term gives them:
+``2 U_j - <u>_j``, the no-slip extrapolation across the wall's surface
+(:func:`parmps.core.kernels.no_slip_velocity`), of the unknowns themselves (taken from u^n
+instead, the extrapolation converged so slowly at a thousand times the limit that a moving
+wall's fluid was still 11 % off its velocity after 30 steps). A free-surface particle keeps its row with the
 neighbours it has (no Dirichlet row: the stress-free surface of MPS). One matrix serves
 every velocity component, ``(1/(dt nu) + 2d/(lambda0 n0) sum_j w_ij) u_i -
-2d/(lambda0 n0) sum_(j moving) w_ij u_j``: symmetric, strictly diagonally dominant
-(a positive definite M-matrix), so CG with the diagonal converges in a few tens of
+2d/(lambda0 n0) sum_(j moving) w_ij u_j`` plus the walls' extrapolation
+``2d/(lambda0 n0) B^T S^-1 B`` (B_jk = w_jk from wall j to fluid k, S_j its row sum):
+symmetric positive definite, so CG with the diagonal converges in a few tens of
 iterations. It is assembled by the pressure matrix's kernel (the standard Laplacian's
 rows, :class:`parmps.fluid.schemes.laplacian.StandardLaplacian`) and solved on the
 pressure's distributed PETSc machinery (:class:`parmps.fluid.ppe.PressureSolver`, options
