@@ -23,6 +23,7 @@ from parmps.coupling.implicit_pressure import ImplicitPressureCoupling
 from parmps.coupling.weak import WeakCoupling
 from parmps.fluid.forces import fluid_force_parts
 from parmps.fluid.constants import MPSConstants
+from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import GRADIENTS, scheme_class
 from parmps.io.frames import read_frame
 from parmps.solids.mass_spring.model import MassSpringModel
@@ -39,7 +40,8 @@ def coupling_of(case, scheme=ImplicitPressureCoupling):
     gradient = scheme_class(GRADIENTS, case["mps"]["gradient"])(
         case["mps"][case["mps"]["gradient"]], constants)
     # viscous_velocity: None after a step that took viscosity explicitly.
-    fluid = SimpleNamespace(constants=constants, gradient=gradient, viscous_velocity=None)
+    fluid = SimpleNamespace(constants=constants, gradient=gradient,
+                            domain=Domain.from_case(case), viscous_velocity=None)
     return scheme(MassSpringModel.from_case(case), MPI.COMM_SELF, fluid)
 
 
