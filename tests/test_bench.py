@@ -179,3 +179,16 @@ def test_a_repeat_count_below_one_is_refused_in_one_line():
     assert error_lines(result.stderr) == [
         "parmps: error: bench: argument --repeat: expected a whole number of at least 1, "
         "not '0'"]
+
+
+def test_the_periodic_cost_pair_holds_the_same_particles():
+    """--periodic-cost compares like with like: the periodic duct and the open one (its inlet
+    buffer's particles included) hold the same count of fluid and wall particles."""
+    from parmps.boundaries.open import OpenBoundaries
+    from parmps.geometry import scene
+    from parmps.validation import bench
+    periodic = scene.build(bench._case(bench.BODY_SPACING, 10, (), "duct_periodic"))[0]
+    case = bench._case(bench.BODY_SPACING, 10, (), "duct_open")
+    from mpi4py import MPI
+    opened = scene.build(case, open_boundaries=OpenBoundaries(case, MPI.COMM_SELF))[0]
+    assert len(opened) == len(periodic)

@@ -18,12 +18,12 @@ from mpi4py import MPI
 
 from conftest import case_of, error_lines, run_parmps
 from parmps import open_result
+from parmps.geometry.domain import Domain
 from parmps.core.particles import FLUID, SOLID, Particles
 from parmps.coupling.implicit_pressure import ImplicitPressureCoupling
 from parmps.coupling.weak import WeakCoupling
 from parmps.fluid.forces import fluid_force_parts
 from parmps.fluid.constants import MPSConstants
-from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import GRADIENTS, scheme_class
 from parmps.io.frames import read_frame
 from parmps.solids.mass_spring.model import MassSpringModel

@@ -495,13 +495,17 @@ def test_the_wall_crossing_check_counts_particles_going_into_the_material(tmp_pa
         check = WallCrossing(case["check"][0], case, result, None, 0.01, 1.0)
         state = types.SimpleNamespace(particles=particles, time=0.0, step=0)
         check.start(state)
-        # Particle 6 goes 0.2 l0 into the cylinder (radius 0.04 about (0.15, 0.1)), 7 stays.
-        particles.position[1] = [0.15, 0.138]
+        # Particle 6 goes 0.7 l0 into the cylinder (radius 0.04 about (0.15, 0.1)): through
+        # its surface; 5 goes 0.2 l0 in, level with the first layer of its particles where it
+        # lies deepest: contact, recorded as the deepest, not counted; 7 stays.
+        particles.position[1] = [0.15, 0.133]
+        particles.position[0] = [0.15 + 0.038, 0.1]
         for step in (1, 2):  # in the material for two steps: counted once
             state.step, state.time = step, 0.002 * step
             check.observe(state)
         check.finish(state)
         assert file["checks/wall_crossing_cylinder/crossings"][:].tolist() == [1, 0]
+        assert file["checks/wall_crossing_cylinder/deepest"][:] == pytest.approx([0.007] * 2)
         assert check.total == 1
 
 

@@ -35,7 +35,7 @@ from parmps.core.geometry import format_point
 from parmps.core.particles import FLUID, INFLOW
 from parmps.errors import CaseError
 from parmps.geometry.domain import Domain
-from parmps.fluid.forces import pressure_force_from
+from parmps.fluid.forces import fluid_force_parts, pressure_force_from
 from parmps.fluid.participant import Participant
 
 # The walls that may move: tanks, wall boxes and walls of any shape (parmps.geometry).
@@ -135,9 +135,14 @@ class MovingWalls(Participant):
         rows = np.flatnonzero(np.isin(particles.kind[:n], (FLUID, INFLOW)))
         for spec, low, high in moving:
             wall = (particles.id >= low) & (particles.id < high)
-            force = pressure_force_from(particles, rows, self.fluid.constants, wall)
+            force = pressure_force_from(particles, rows, self.fluid.constants, wall).sum(axis=0)
+            # The wall's viscous force on the fluid: the reaction to the fluid's on its owned
+            # particles (a sheared lid drives the flow by that alone).
+            own = np.flatnonzero(wall[:n])
+            force -= fluid_force_parts(particles, own, self.fluid.constants,
+                                       self.fluid.gradient)[1].sum(axis=0)
             velocity = (travel(spec, time + dt) - travel(spec, time)) / dt
-            self.work_done += dt * float(force.sum(axis=0) @ velocity)
+            self.work_done += dt * float(force @ velocity)
         return particles
 
     def work(self):

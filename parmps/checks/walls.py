@@ -4,25 +4,31 @@ its material within a step.
 Every step each owned fluid particle gets its depth in the wall's material, the signed
 distance to its surface on the side away from the fluid
 (:class:`parmps.geometry.walls.MaterialDepth`, the guard's own test; a moving wall where its
-motion has taken it). A particle in the material (depth > 0) now that was not in it at the
-previous step crossed the surface in the step; one that stays in counts once. The wall's
-particles hold the water about half a spacing in front of the surface, so a count is a leak,
-not contact. The guard (parmps.run.guards) stops the run once a particle is half a spacing
-deep; the check counts what the guard lets pass, and where it is the only record (a run that
-must go on).
+motion has taken it). A particle deeper than half a spacing (the guard's ``WALL_MARGIN``:
+there its centre is level with the first layer of a flat wall's particles) now that was not
+at the previous step went through the wall's surface in the step; one that stays counts
+once. Contact is not a count: the first layer of a curved wall's particles, laid on the
+lattice, lies 0.07-1 l0 behind its surface (a 2D circle of 10 l0 radius; a pipe's 0.28-1
+l0), so water pressed against it may sit a quarter of a spacing behind the surface where the
+layer lies deep; the deepest any fluid particle sat is recorded each step (``deepest``).
+The guard (parmps.run.guards) stops the run once a particle is that deep in a tank's or a
+wall box's material; here the check is the record (a run that must go on).
 
 The count is a result, not a stop: ``/checks/<name>`` in result.h5 holds, per step, the
-time, the crossings in the step and their total so far.
+time, the crossings in the step, their total so far and the deepest fluid particle's depth
+[m] (negative: none in the material).
 """
 
 import logging
 
 import numpy as np
+from mpi4py import MPI
 
 from parmps.boundaries.walls import travel
 from parmps.core.particles import FLUID
 from parmps.geometry.walls import MaterialDepth
 from parmps.io.series import Series
+from parmps.run.guards import WALL_MARGIN
 from parmps.run.observers import Observer
 from parmps.run.schedule import SimulatedInterval
 
@@ -45,7 +51,8 @@ class WallCrossing(Observer):
         group.attrs["kind"] = spec["kind"]
         group.attrs["wall"] = self.wall_name
         self.series = Series(group, {"time": (np.float64, ()), "crossings": (np.int64, ()),
-                                     "total": (np.int64, ())})
+                                     "total": (np.int64, ()), "deepest": (np.float64, ())})
+        self.margin = WALL_MARGIN * case["particles"]["spacing"]
         self.cadence = SimulatedInterval(interval, end_time)
         self.total = 0
         # Rank 0's record of the fluid particles in the material at the last step.
@@ -53,23 +60,26 @@ class WallCrossing(Observer):
         self.resumed = False
 
     def _in_material(self, particles, time):
-        """The ids of every rank's owned fluid particles in the wall's material, on rank 0."""
+        """The ids of every rank's owned fluid particles through the wall's surface (deeper
+        than the margin), on rank 0, and the deepest one's depth (on every rank)."""
         n = particles.n_owned
         fluid = np.flatnonzero(particles.kind[:n] == FLUID)
         depth, _ = self.depth.depth(particles.position[fluid], [travel(self.spec, time)])
-        ids = particles.id[fluid[depth > 0.0]].astype(np.int64)
+        ids = particles.id[fluid[depth > self.margin]].astype(np.int64)
+        deepest = self.comm.allreduce(float(depth.max()) if len(depth) else -np.inf,
+                                      op=MPI.MAX)
         gathered = self.comm.gather(ids, root=0)
         if self.comm.rank != 0:
-            return None
-        return np.sort(np.concatenate(gathered))
+            return None, deepest
+        return np.sort(np.concatenate(gathered)), deepest
 
     def start(self, state):
-        inside = self._in_material(state.particles, state.time)
+        inside, _ = self._in_material(state.particles, state.time)
         if self.comm.rank == 0 and not self.resumed:  # a continued run has its record
             self.inside = inside
 
     def observe(self, state):
-        inside = self._in_material(state.particles, state.time)
+        inside, deepest = self._in_material(state.particles, state.time)
         crossings = 0
         if self.comm.rank == 0:
             crossings = int(np.count_nonzero(~np.isin(inside, self.inside,
@@ -81,7 +91,8 @@ class WallCrossing(Observer):
                         "(check %s)", state.step, state.time, crossings, self.wall_name,
                         self.label)
         self.total += crossings
-        self.series.add({"time": state.time, "crossings": crossings, "total": self.total})
+        self.series.add({"time": state.time, "crossings": crossings, "total": self.total,
+                         "deepest": deepest if np.isfinite(deepest) else np.nan})
         if self.cadence.due(state.time):
             self.series.flush(self.comm.rank)
 

@@ -304,6 +304,34 @@ def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid)
     return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
 
 
+@numba.njit(cache=True, inline="always")
+def _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, d):
+    out = np.zeros((n_rows, d))
+    weights = np.zeros(n_rows)
+    for i in range(n_rows):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not is_fluid[j]:
+                continue
+            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w > 0.0:
+                weights[i] += w
+                for k in range(d):
+                    out[i, k] += (velocity[j, k] - velocity[i, k]) * w
+    return out, weights
+
+
+@numba.njit(cache=True)
+def fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+    """``(sum_j (u_j - u_i) w_ij, sum_j w_ij)`` over the fluid neighbours j of the rows
+    ``n_rows``: what the no-slip wall's viscous force on a wall, body or node particle is
+    made of (:func:`no_slip_velocity`)."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, 2)
+    return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
+
+
 # --- divergence -------------------------------------------------------------------------------
 
 @numba.njit(cache=True, inline="always")

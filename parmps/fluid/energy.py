@@ -55,6 +55,15 @@ def body_force_power(particles, mass, force, mask=None):
     return mass * float(np.sum(particles.velocity[:n][mask] @ force))
 
 
+def rise_scale(initial, row):
+    """What a rise of the budget is measured against: the larger of the fluid's initial
+    energy |E0| and the work done on it so far (the row's |boundary work|). That is E0 for a
+    flow that starts with its energy (a dam break); for one that starts at rest with nothing
+    to fall (a channel driven by a body force, a sheared lid) it is what has been given to
+    it, so round-off on a zero is not taken for a source."""
+    return max(abs(initial), abs(row["boundary_work"]))
+
+
 def budget(row):
     """What can only fall in a flow with fixed walls and no inflow: the fluid's and the
     bodies' energy less the work the boundaries did, from a diagnostics row (or columns)."""

@@ -6,7 +6,7 @@ import numpy as np
 from parmps.core import kernels
 from parmps.core.lattice import neighbour_count_reference
 from parmps.core.neighbours import pair_list
-from parmps.core.particles import DUMMY
+from parmps.core.particles import DUMMY, FLUID, INFLOW
 
 
 def fluid_forces(particles, rows, constants, gradient, velocity=None):
@@ -32,10 +32,13 @@ def fluid_force_parts(particles, rows, constants, gradient, velocity=None):
     the fluid felt the nodes through u*, and the nodes feel the fluid through it, so the
     pairs' viscous forces are equal and opposite.
 
-    The viscous force is ``k_i (u_bar_i - u_i)`` with u_bar the weighted mean of
-    the neighbours' velocities; the rate returned is k_i / (rho V) =
-    ``nu 2d/(lambda0 n0) sum_j w_ij`` [1/s] (how fast that force would relax
-    the velocity of a particle of the fluid's density). Returns ((n, d), (n, d), (n,)).
+    The viscous force is the reaction to the fluid's own viscous term beside a no-slip
+    wall, in which particle i carries ``2 u_i - <u>_i`` (:func:`kernels.no_slip_velocity`):
+    summed over its fluid neighbours j, ``V mu c w_ij (u_j - (2 u_i - <u>_i))`` is
+    ``2 V mu c sum_j w_ij (u_j - u_i)``, c = 2d/(lambda0 n0): ``k_i (u_bar_i - u_i)`` with
+    u_bar the weighted mean of the fluid neighbours' velocities. The rate returned is
+    k_i / (rho V) = ``2 nu c sum_j w_ij`` [1/s] (how fast that force would relax the velocity
+    of a particle of the fluid's density). Returns ((n, d), (n, d), (n,)).
     """
     dimension = particles.position.shape[1]
     n = len(rows)
@@ -55,12 +58,13 @@ def fluid_force_parts(particles, rows, constants, gradient, velocity=None):
         coefficient = 2.0 * dimension / (constants.lambda0 * constants.n0_laplacian)
         velocity = np.ascontiguousarray((particles.velocity if velocity is None
                                          else velocity)[order])
-        reach = constants.re_laplacian
-        laplacian = coefficient * kernels.vector_laplacian_sum(indptr, cols, position,
-                                                               velocity, reach, n)
-        viscous_force = volume * constants.density * constants.viscosity * laplacian
-        viscous_rate = (constants.viscosity * coefficient
-                        * kernels.number_density(indptr, cols, position, reach, n)[0])
+        kind = particles.kind[order]
+        drag, weight = kernels.fluid_drag_sum(indptr, cols, position, velocity,
+                                              constants.re_laplacian, n,
+                                              (kind == FLUID) | (kind == INFLOW))
+        viscous_force = 2.0 * volume * constants.density * constants.viscosity * \
+            coefficient * drag
+        viscous_rate = 2.0 * constants.viscosity * coefficient * weight
     return pressure_force, viscous_force, viscous_rate
 
 

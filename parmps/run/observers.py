@@ -176,6 +176,7 @@ class EnergyWatch(Observer):
         self.tolerance = tolerance
         self.initial = None  # the fluid's energy after the first step
         self.last = None  # the budget at the last output
+        self.scale = 0.0  # what a rise is measured against (energy.rise_scale)
         self.warned = False
 
     def checkpoint_state(self):
@@ -196,11 +197,12 @@ class EnergyWatch(Observer):
         budget = energy.budget(row)
         if self.initial is None:
             self.initial, self.last = row["fluid_energy"], budget
+        self.scale = energy.rise_scale(self.initial, row)
         if not self.cadence.due(state.time):
             return
         rise = budget - self.last
         self.last = budget
-        if self.warned or not rise > self.tolerance * abs(self.initial):
+        if self.warned or not rise > self.tolerance * self.scale:
             return
         self.warned = True
         where = fastest_fluid(state.particles, self.comm)
@@ -209,7 +211,7 @@ class EnergyWatch(Observer):
                         "%.3g %% of its initial value since the last output with no work "
                         "done on it: a numerical source (docs/design.md §1.8)%s",
                         state.step, state.time, " and its bodies" if "body_energy" in row
-                        else "", 100.0 * rise / abs(self.initial), where)
+                        else "", 100.0 * rise / self.scale, where)
 
 
 def fastest_fluid(particles, comm):

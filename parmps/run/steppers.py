@@ -91,6 +91,7 @@ class FluidStepper:
         # less the boundaries' work) since: a rise above it is a numerical source.
         self.initial_energy = None
         self.lowest_budget = None
+        self.rise_scale = 0.0
         # This rank's share of the energy fluid particles brought in when they joined the
         # fluid (at an inlet) less what they took away (an outlet, escaped fluid), and of
         # the work of the body force along the periodic axes [J].
@@ -105,7 +106,7 @@ class FluidStepper:
                            "initial": np.nan if self.initial_energy is None
                            else self.initial_energy,
                            "lowest": np.nan if self.lowest_budget is None
-                           else self.lowest_budget}
+                           else self.lowest_budget, "scale": self.rise_scale}
         return saved
 
     def restore_state(self, saved):
@@ -124,6 +125,8 @@ class FluidStepper:
             if not np.isnan(saved["energy"]["initial"]):
                 self.initial_energy = float(saved["energy"]["initial"])
                 self.lowest_budget = float(saved["energy"]["lowest"])
+                self.rise_scale = float(saved["energy"].get("scale",
+                                                            abs(self.initial_energy)))
 
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
@@ -277,15 +280,16 @@ class FluidStepper:
         budget = energy.budget(values)
         if self.initial_energy is None:
             self.initial_energy, self.lowest_budget = values["fluid_energy"], budget
+        self.rise_scale = energy.rise_scale(self.initial_energy, values)
         self.budget = budget
         self.lowest_budget = min(self.lowest_budget, budget)
 
     def energy_rise(self):
         """How far the fluid's and bodies' energy, less the boundaries' work, has risen above
         its lowest value so far, over the fluid's initial energy (0 before the first step)."""
-        if self.initial_energy is None or self.initial_energy == 0.0:
+        if self.initial_energy is None or self.rise_scale == 0.0:
             return 0.0
-        return (self.budget - self.lowest_budget) / abs(self.initial_energy)
+        return (self.budget - self.lowest_budget) / self.rise_scale
 
     def _drive_power(self, particles):
         """This rank's power of the body force along the periodic axes on its fluid [W]."""

@@ -216,12 +216,14 @@ def surge_front_error(path, case, reference, compare_until=3.0, delay_range=(0.0
 def hydrostatic_pressure_error(path, case, settle_time):
     """Pressure error of a still tank after ``settle_time``, relative to rho g H.
 
-    The water's floor, surface (so H), width, density, gravity and l0 come from
-    ``case``. Each particle's pressure is compared in every frame with the weight
-    of the water above it: rho g l0^d (N_above + 1/2) / W, N_above the fluid
-    particles higher than it and W the water's width (its horizontal area in
-    3D). That reference follows the column if it settles or expands, which
-    ``height_drift`` reports on its own. Returns a dict:
+    The water's floor and surface (so H) and its width W (its horizontal area in 3D) are
+    the first frame's: half a spacing below its lowest and above its highest fluid
+    particles, and the bottom row's particles times l0^(d-1) (a box's width; a vessel of any
+    shape with upright walls, its cross-section as the lattice samples it); density,
+    gravity and l0 come from ``case``. Each particle's pressure is compared in every frame
+    with the weight of the water above it: rho g l0^d (N_above + 1/2) / W, N_above the fluid
+    particles higher than it. That reference follows the column if it settles or expands,
+    which ``height_drift`` reports on its own. Returns a dict:
 
     - ``bottom``: the time-averaged error, mean over the initial bottom fluid row;
     - ``rms``: RMS over every fluid particle but the initial top row (the free-surface
@@ -235,9 +237,6 @@ def hydrostatic_pressure_error(path, case, settle_time):
       averaged over the frames after ``settle_time``, relative to its value in
       the first frame, minus 1 (positive: the column has expanded).
     """
-    lower, upper = fluid_extent(case)
-    # The vertical is the last axis (y in 2D, z in 3D).
-    surface, depth = upper[-1], upper[-1] - lower[-1]
     spacing = case["particles"]["spacing"]
     density, g = case["fluid"]["density"], gravity(case)
     all_frames = read_frames(path)
@@ -246,12 +245,17 @@ def hydrostatic_pressure_error(path, case, settle_time):
         raise ValueError(f"no frame after t = {settle_time}")
     first = all_frames[0]
     fluid = first["kind"] == FLUID
+    # The vertical is the last axis (y in 2D, z in 3D).
     y0 = first["position"][:, -1]
+    dimension = first["position"].shape[1]
+    floor = float(y0[fluid].min()) - 0.5 * spacing
+    surface = float(y0[fluid].max()) + 0.5 * spacing
+    depth = surface - floor
     bottom = fluid & (y0 < y0[fluid].min() + 0.5 * spacing)
     interior = fluid & (y0 < surface - spacing)
     scale = density * g * depth
-    width = float(np.prod(upper[:-1] - lower[:-1]))
-    particle_weight = density * g * spacing ** len(upper) / width
+    width = np.count_nonzero(bottom) * spacing ** (dimension - 1)
+    particle_weight = density * g * spacing ** dimension / width
 
     def weight_above(frame):
         # Zero for every particle but the fluid, which is all the errors below read.
@@ -269,7 +273,6 @@ def hydrostatic_pressure_error(path, case, settle_time):
     series = errors[:, bottom].mean(axis=1)
     last = all_frames[-1]
     speed = np.sqrt((last["velocity"][last["kind"] == FLUID] ** 2).sum(axis=1))
-    floor = lower[-1]
 
     def column_height(frame):
         return 2.0 * float(np.mean(frame["position"][frame["kind"] == FLUID, -1] - floor))
@@ -1194,3 +1197,24 @@ def flag_oscillation(path, case, probe="A", start=0.0, reference=None):
     for name, expected in (reference or {}).items():
         measured[f"{name}_error"] = measured[name] / expected - 1.0
     return measured
+
+
+# --------------------------------------------------------------------------
+# A wall of any shape in a violent flow: the wall_crossing check's record
+
+def wall_crossings(path, case, check):
+    """A ``wall_crossing`` check's record (validation/dam_break_cylinder/): ``crossings``, the
+    fluid particles that went through the wall's surface (deeper than half a spacing) over
+    the run; ``deepest``, the deepest any fluid particle sat in its material [spacings];
+    ``removed``, the fluid removed outside the domain over the fluid at t = 0; ``end`` [s]."""
+    from parmps.result import open_result
+    with open_result(path) as result:
+        record = result.checks[check]
+        total = np.asarray(record["total"])
+        deepest = np.asarray(record["deepest"])
+        d = result.diagnostics
+        return {"crossings": int(total[-1]) if len(total) else 0,
+                "deepest": float(np.nanmax(deepest) / case["particles"]["spacing"])
+                if len(deepest) and np.any(np.isfinite(deepest)) else float("-inf"),
+                "removed": float(d["n_escaped"][-1] / (d["n_fluid"][0] + d["n_escaped"][0])),
+                "end": float(d["time"][-1])}

@@ -5,6 +5,7 @@
     python -m parmps bench --time-to-solution [--spacing L0 ...] [--ranks R ...]
                            [--end-time T] [--set SECTION.KEY=VALUE ...]
     python -m parmps bench --solid-cost [--ranks R ...] [--steps S] [--warmup W]
+    python -m parmps bench --periodic-cost [--ranks R ...] [--steps S] [--warmup W]
 
 (``scripts/bench.py`` is the same command.)
 
@@ -39,6 +40,12 @@ the same tank with water in the body's place (``--scene body_3d_fluid``), A B A 
 rank count, and prints the body's share of the step, ``solid_cost``, against
 ``SOLID_COST_TARGET`` (10 %). The breakdown's ``other`` is what the fluid's parts leave: the
 bodies' substeps, their coupling and the driver.
+
+``--periodic-cost`` times a 3D square duct, 20 l0 across and 60 l0 long (l0 = 1 cm), walls on
+four sides, periodic along its axis and driven by a body force (``--scene duct_periodic``),
+against the same duct with an inlet buffer at one end and an outlet at the other
+(``--scene duct_open``), A B A B on each rank count, and prints periodicity's extra cost per
+particle-step, ``periodic_cost``, against ``PERIODIC_COST_TARGET`` (5 %).
 
 ``--time-to-solution`` runs cases/dam_break_2d_peer.toml (the 2D dam break of
 MPS-Basic's and DualSPHysics's examples) as a user would, ``python -m parmps``
@@ -87,9 +94,14 @@ SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_br
 # around a submerged lattice body of BODY_NODES^3 nodes (10,648: the issue's 10k-node body in
 # a 100k-particle fluid), against the same tank with the body's place filled with water. The
 # body is rubber (the elastic gate's E = 12 MPa, rho = 1100 kg/m^3), its volume kept.
-BUILT_SCENES = {"body_3d": True, "body_3d_fluid": False}
 FLUID_CELLS, BODY_NODES, BODY_SPACING = 48, 22, 0.01
 SOLID_COST_TARGET = 0.10
+# Periodicity's cost (--periodic-cost): a 3D square duct DUCT_SECTION cells across and
+# DUCT_LENGTH long at l0 = BODY_SPACING, walls on four sides, periodic along x and driven by a
+# body force, against the same duct with an inlet and an outlet (the same particles to within
+# the inlet's buffer); the cost per particle-step of the first over the second, minus one.
+DUCT_SECTION, DUCT_LENGTH = 20, 60
+PERIODIC_COST_TARGET = 0.05
 # The 3D time to solution: 0.55/20 m to t = 0.5 s, half of DualSPHysics's seconds.
 SPACINGS_3D = (0.0275,)
 TIME_TO_SOLUTION_TARGETS_3D = {(0.0275, 1): 423.0, (0.0275, 2): 211.5}
@@ -105,6 +117,46 @@ FRONT_COMPARE_UNTIL = 2.8
 TIME_TO_SOLUTION_TARGETS = {(0.005, 1): 41.0, (0.005, 2): 28.5,
                             (0.0025, 1): 367.5, (0.0025, 2): 203.5}
 TARGET_END_TIME = 0.5
+
+
+def _duct(periodic):
+    """The raw case of the periodic-cost scene (see DUCT_SECTION): periodic along x and
+    driven by gravity along -x, or open, water entering at the right end through an inlet
+    buffer and leaving through the left side, both moving at 0.1 m/s along -x."""
+    l0 = BODY_SPACING
+    side, length, wall = DUCT_SECTION * l0, DUCT_LENGTH * l0, 4 * l0
+    raw = {"title": f"{'periodic' if periodic else 'open'} duct (bench)",
+           "domain": {"lower": [0.0, -wall, -wall], "upper": [length, side + wall, side + wall]},
+           "particles": {"spacing": l0}, "fluid": {"viscosity": 1e-2},
+           "time": {"end": 1.0}}
+    walls = []
+    for axis in (1, 2):
+        for lo, hi in ((-wall, 0.0), (side, side + wall)):
+            lower, upper = [0.0, 0.0, 0.0], [length, side, side]
+            lower[axis], upper[axis] = lo, hi
+            if axis == 1:  # the side walls take the corners
+                lower[2], upper[2] = -wall, side + wall
+            walls.append({"lower": lower, "upper": upper})
+    raw["wall_box"] = walls
+    velocity = [-0.1, 0.0, 0.0]
+    if periodic:
+        raw["domain"]["periodic"] = ["x"]
+        raw["physics"] = {"gravity": [-1.0, 0.0, 0.0]}
+        raw["fluid_block"] = [{"lower": [0.0, 0.0, 0.0], "upper": [length, side, side],
+                               "velocity": velocity}]
+        return raw
+    raw["physics"] = {"gravity": [0.0, 0.0, 0.0]}
+    raw["fluid_block"] = [{"lower": [0.0, 0.0, 0.0], "upper": [length - wall, side, side],
+                           "velocity": velocity}]
+    raw["inlet"] = [{"lower": [length - wall, 0.0, 0.0], "upper": [length, side, side],
+                     "velocity": velocity}]
+    raw["outlet"] = [{"side": "left", "velocity": velocity, "buffer": 4}]
+    return raw
+
+
+BUILT_SCENES = {"body_3d": lambda: _submerged_body(True),
+                "body_3d_fluid": lambda: _submerged_body(False),
+                "duct_periodic": lambda: _duct(True), "duct_open": lambda: _duct(False)}
 
 
 def spacing_for(target, scene_name="dam_break"):
@@ -182,7 +234,7 @@ def _submerged_body(with_body):
 def _case(spacing, steps=0, overrides=(), scene_name="dam_break"):
     from parmps import config, schema
     if scene_name in BUILT_SCENES:
-        raw = _submerged_body(BUILT_SCENES[scene_name])
+        raw = BUILT_SCENES[scene_name]()
     else:
         with open(SCENES[scene_name], "rb") as handle:
             raw = config.load_text(handle.read().decode())
@@ -457,7 +509,12 @@ def build_parser():
     parser.add_argument("--scene", choices=tuple(SCENES) + tuple(BUILT_SCENES),
                         default="dam_break",
                         help="dam_break (2D, the default), dam_break_3d (SPHERIC Test 2), "
-                             "body_3d or body_3d_fluid (the --solid-cost pair)")
+                             "body_3d or body_3d_fluid (the --solid-cost pair), "
+                             "duct_periodic or duct_open (the --periodic-cost pair)")
+    parser.add_argument("--periodic-cost", action="store_true",
+                        help="a 3D duct periodic along its axis against the same duct with "
+                             "an inlet and an outlet, paired A B A B; periodicity's cost per "
+                             "particle-step against its 5 %% target")
     parser.add_argument("--solid-cost", action="store_true",
                         help="a 10,648-node rubber body in a 100k-particle still tank "
                              "against the tank with water in its place, paired A B A B; "
@@ -501,6 +558,8 @@ def main(argv=None):
         return _project(args.project, args.cost)
     if args.solid_cost:
         return solid_cost(args)
+    if args.periodic_cost:
+        return periodic_cost(args)
     if args.scaling:
         from parmps.validation import scaling
         status = 0
@@ -615,6 +674,30 @@ def solid_cost(args):
                           "within_target": cost <= SOLID_COST_TARGET}), flush=True)
     return status
 
+
+
+def periodic_cost(args):
+    """Periodicity's cost per particle-step: the periodic duct and the open one, paired
+    (A B A B) on each rank count; one JSON line per run, then the summary against
+    PERIODIC_COST_TARGET."""
+    status = 0
+    for ranks in args.ranks or [1]:
+        cost = {"duct_open": [], "duct_periodic": []}
+        for _ in range(2):
+            for scene_name in cost:
+                line = _timed_run(args, scene_name, BODY_SPACING, ranks)
+                print(json.dumps(dict(line, scene=scene_name)), flush=True)
+                if "error" in line:
+                    return 1
+                cost[scene_name].append(line["us_per_particle_step"])
+        ratio = [p / o for p, o in zip(cost["duct_periodic"], cost["duct_open"])]
+        extra = statistics.median(ratio) - 1.0
+        status = status or int(extra > PERIODIC_COST_TARGET)
+        print(json.dumps({"ranks": ranks, "us_open": cost["duct_open"],
+                          "us_periodic": cost["duct_periodic"],
+                          "periodic_cost": round(extra, 4), "target": PERIODIC_COST_TARGET,
+                          "within_target": extra <= PERIODIC_COST_TARGET}), flush=True)
+    return status
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -6,7 +6,10 @@ that the walls and fluid from files are tested on files another tool wrote:
   z in [0.05, 0.15] m, a 128-sided prism with fans on its ends (ASCII);
 - pipe.stl: a pipe of radius 8 mm about the x axis, x in [-8, 20] mm, a 128-sided prism with
   fans on its ends (binary): the periodic pipe of cases/hagen_poiseuille_3d.toml, whose
-  period [0, 12] mm it overhangs by 8 mm at each end, so its caps lie outside the domain.
+  period [0, 12] mm it overhangs by 8 mm at each end, so its caps lie outside the domain;
+- vessel.stl: a closed upright cylinder of radius 0.1 m about x = y = 0.1 m, z in [0, 0.3] m,
+  a 128-sided prism with fans on its ends (binary): the still tank of
+  cases/hydrostatic_cylinder_3d.toml.
 
 Run it from anywhere: python tests/meshes/make_meshes.py
 """
@@ -61,6 +64,9 @@ def main():
                      binary=False)
     points, triangles = along_x(*cylinder((0.0, 0.0), 0.008, -0.008, 0.020, 128))
     meshio.write(os.path.join(HERE, "pipe.stl"), meshio.Mesh(points, [("triangle", triangles)]),
+                 binary=True)
+    points, triangles = cylinder((0.1, 0.1), 0.1, 0.0, 0.3, 128)
+    meshio.write(os.path.join(HERE, "vessel.stl"), meshio.Mesh(points, [("triangle", triangles)]),
                  binary=True)
 
 
