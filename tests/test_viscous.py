@@ -286,3 +286,27 @@ def test_plane_poiseuille_start_up_at_25_to_100_times_the_viscous_limit(tmp_path
         transient.append(measured["transient_rms"])
     ratios = np.array(transient[1:]) / np.array(transient[:-1])
     assert np.all((ratios > 1.6) & (ratios < 2.4)), (transient, ratios)
+
+
+def test_couette_start_up_at_25_and_50_times_the_viscous_limit(tmp_path):
+    """tests/cases/periodic_couette.toml (a lid moving along the periodic axis; viscous limit
+    2e-4 s) at dt = 5e-3 and 1e-2 s, implicit: the last frame (t = 0.2 s) within 1 % of U of
+    the series, and the start-up's largest RMS error first order, doubling dt multiplying it
+    by 1.6-2.4 (measured: 3.0 and 5.4 % of U, 0.14 and 0.24 % at the end; 0.81 % at the case's
+    own 1e-3 s)."""
+    from test_periodic import COUETTE, _couette_series
+    from parmps.io.frames import read_frames
+    worst = []
+    for dt in (5e-3, 1e-2):
+        out = tmp_path / f"dt{dt:g}"
+        result = run_parmps([COUETTE, "-o", out, "--set", f"time.dt_max={dt!r}"], timeout=300)
+        assert result.returncode == 0, result.stderr
+        assert "viscosity: backward Euler from step 1" in result.stderr
+        errors = []
+        for frame in read_frames(out / "result.h5")[1:]:
+            fluid = frame["kind"] == FLUID
+            y, u = frame["position"][fluid, 1], frame["velocity"][fluid, 0]
+            errors.append(np.sqrt(np.mean((u - _couette_series(y, frame["time"])) ** 2)) / 0.01)
+        assert errors[-1] < 0.01, (dt, errors[-1])
+        worst.append(max(errors))
+    assert 1.6 < worst[1] / worst[0] < 2.4, worst
