@@ -34,7 +34,9 @@ The node's own share of
 the relaxation beyond the fluid's is therefore taken implicitly (backward
 Euler in u_i): the force is divided by ``1 + dt k_i (1/m_i - 1/m_0)``, m_0 the
 mass of a fluid particle. At density ratio 1 and above the force is the weak
-coupling's unchanged.
+coupling's unchanged. In a step beyond the viscous limit the fluid's viscous term is implicit
+(:mod:`parmps.fluid.viscous`) and the node's whole relaxation is taken implicitly, in either
+coupling (:meth:`parmps.coupling.weak.WeakCoupling.node_forces`).
 """
 
 import numpy as np
@@ -73,22 +75,6 @@ class ImplicitPressureCoupling(WeakCoupling):
                 f"to step (the added-mass instability's explicit remainder; docs/validation.md, "
                 f"Stability map). Shorten the step (time.dt_max) or make the body heavier")
 
-    def __init__(self, model, comm, fluid):
-        super().__init__(model, comm, fluid)
-        constants = fluid.constants
-        volume = constants.spacing ** constants.dimension
-        # rho0 / rho_i = rho0 l0^d / m_i per particle node, bodies one after the other;
-        # a node that does not move (1/m = 0) is weighed like a wall (1).
-        node_mobility = []
-        for k in range(len(model.bodies)):
-            inverse_mass = np.asarray(model.node_inverse_mass(k), dtype=float)
-            node_mobility.append(np.where(inverse_mass > 0.0,
-                                          constants.density * volume * inverse_mass, 1.0))
-        counts = [len(m) for m in node_mobility]
-        self.first_node = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) \
-            if counts else np.zeros(0, np.int64)
-        self.node_mobility = np.concatenate(node_mobility) if counts else np.zeros(0)
-
     def pressure_mobility(self, particles):
         """rho0/rho_i of every local particle (ghosts too): 1 but on body nodes.
 
@@ -100,13 +86,13 @@ class ImplicitPressureCoupling(WeakCoupling):
         mobility[nodes] = self.mobility_of(particles, nodes)
         return mobility
 
-    def mobility_of(self, particles, nodes):
-        """rho0/rho_i of the node particles ``nodes`` (indices into ``particles``)."""
-        return self.node_mobility[self.first_node[particles.body[nodes]] + particles.node[nodes]]
-
     def node_forces(self, particles, rows, dt):
         """Pressure force, plus the viscous force with a light node's excess relaxation
-        taken implicitly (see the module's docstring)."""
+        taken implicitly (see the module's docstring); after a step that took viscosity
+        implicitly, the weak coupling's force from the fluid's u* with the node's whole
+        relaxation implicit (:meth:`WeakCoupling.node_forces`)."""
+        if self.fluid.viscous_velocity is not None:
+            return super().node_forces(particles, rows, dt)
         pressure_force, viscous_force, viscous_rate = fluid_force_parts(
             particles, rows, self.fluid.constants, self.fluid.gradient)
         excess = np.maximum(self.mobility_of(particles, rows) - 1.0, 0.0)

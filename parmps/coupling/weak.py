@@ -57,7 +57,7 @@ from mpi4py import MPI
 from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
 from parmps.core.particles import SOLID, owned_fluid_near
 from parmps.errors import RunFailure
-from parmps.fluid.forces import fluid_forces
+from parmps.fluid.forces import fluid_force_parts, fluid_forces
 from parmps.fluid.participant import Participant
 
 log = logging.getLogger(__name__)
@@ -98,6 +98,23 @@ def light_bodies(density_ratio):
     light = {name: ratio for name, ratio in density_ratio.items() if ratio < 1.0 - LIGHT_MARGIN}
     return ", ".join(f"body '{name}' (solid/fluid density {ratio:.3g})"
                      for name, ratio in light.items())
+
+
+def node_mobilities(model, constants):
+    """(each body's first node in the concatenation, rho0/rho_i of every node, bodies one
+    after the other): rho0 l0^d / m_i for a node that moves, 1 (a wall's) for one that does
+    not (1/m = 0)."""
+    volume = constants.spacing ** constants.dimension
+    node_mobility = []
+    for k in range(len(model.bodies)):
+        inverse_mass = np.asarray(model.node_inverse_mass(k), dtype=float)
+        node_mobility.append(np.where(inverse_mass > 0.0,
+                                      constants.density * volume * inverse_mass, 1.0))
+    counts = [len(m) for m in node_mobility]
+    if not counts:
+        return np.zeros(0, np.int64), np.zeros(0)
+    first_node = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+    return first_node, np.concatenate(node_mobility)
 
 
 def fluid_inside(particles, vertices, facets, comm, domain=None):
@@ -172,6 +189,7 @@ class WeakCoupling(Participant):
         self.density_ratio = {body.name: density_ratio(model.node_inverse_mass(k),
                                                        fluid.constants)
                               for k, body in enumerate(model.bodies)}
+        self.first_node, self.node_mobility = node_mobilities(model, fluid.constants)
         light = self.light_bodies() if self.ANSWERS_A_STEP_LATE else ""
         if light and comm.rank == 0:
             log.warning("%s lighter than the fluid: coupling.scheme = \"weak\" is prone to "
@@ -328,9 +346,25 @@ class WeakCoupling(Participant):
             work[self.owners[k]] += len(body.position) * counts[body.name]
         return work
 
+    def mobility_of(self, particles, nodes):
+        """rho0/rho_i of the node particles ``nodes`` (indices into ``particles``)."""
+        return self.node_mobility[self.first_node[particles.body[nodes]] + particles.node[nodes]]
+
     def node_forces(self, particles, rows, dt):
-        """The fluid force on the owned node particles ``rows``, held over the bodies' step."""
-        return fluid_forces(particles, rows, self.fluid.constants, self.fluid.gradient)
+        """The fluid force on the owned node particles ``rows``, held over the bodies' step.
+
+        After a step that took viscosity implicitly (dt beyond the viscous limit) the viscous
+        force reads the fluid's u* (the velocities the fluid's own viscous term solved for
+        beside the nodes), and the node's relaxation towards its neighbours, at a rate
+        k_i/m_i the step's dt would make unstable explicitly, is taken backward Euler in the
+        node's velocity: divided by ``1 + dt k_i/m_i``."""
+        viscous_velocity = self.fluid.viscous_velocity
+        if viscous_velocity is None:
+            return fluid_forces(particles, rows, self.fluid.constants, self.fluid.gradient)
+        pressure_force, viscous_force, viscous_rate = fluid_force_parts(
+            particles, rows, self.fluid.constants, self.fluid.gradient, viscous_velocity)
+        relaxation = dt * viscous_rate * self.mobility_of(particles, rows)
+        return pressure_force + viscous_force / (1.0 + relaxation)[:, None]
 
     # Per-body series beyond the solid model's own: fluid particles inside the outline,
     # which would show a leak.

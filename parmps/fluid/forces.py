@@ -9,21 +9,28 @@ from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW
 
 
-def fluid_forces(particles, rows, constants, gradient):
+def fluid_forces(particles, rows, constants, gradient, velocity=None):
     """Fluid force on the particles ``rows`` (owned): ``-V grad P + V mu lap u``.
 
     ``particles`` must have current ghosts (positions, velocities, pressures);
     ``constants`` are the fluid's MPS constants and ``gradient`` its pressure
     gradient scheme, so a body feels the gradient that moves the fluid.
-    Returns (len(rows), d).
+    ``velocity``: see :func:`fluid_force_parts`. Returns (len(rows), d).
     """
-    pressure_force, viscous_force, _ = fluid_force_parts(particles, rows, constants, gradient)
+    pressure_force, viscous_force, _ = fluid_force_parts(particles, rows, constants, gradient,
+                                                         velocity)
     return pressure_force + viscous_force
 
 
-def fluid_force_parts(particles, rows, constants, gradient):
+def fluid_force_parts(particles, rows, constants, gradient, velocity=None):
     """The pressure force ``-V grad P`` and the viscous force ``V mu lap u`` on ``rows``,
     and each row's viscous relaxation rate for a particle of the fluid's density.
+
+    ``velocity``: every local particle's velocity for the viscous force (ghosts current),
+    or None for ``particles.velocity``. A step that took the viscous term implicitly gives
+    the fluid's u* there (:attr:`parmps.fluid.projection.FluidSolver.viscous_velocity`):
+    the fluid felt the nodes through u*, and the nodes feel the fluid through it, so the
+    pairs' viscous forces are equal and opposite.
 
     The viscous force is the reaction to the fluid's own viscous term beside a no-slip
     wall, in which particle i carries ``2 u_i - <u>_i`` (:func:`kernels.no_slip_velocity`):
@@ -49,7 +56,8 @@ def fluid_force_parts(particles, rows, constants, gradient):
         # The compiled sums the fluid's own viscous term uses (numpy over the pairs cost
         # most of this function on a 10k-node body).
         coefficient = 2.0 * dimension / (constants.lambda0 * constants.n0_laplacian)
-        velocity = np.ascontiguousarray(particles.velocity[order])
+        velocity = np.ascontiguousarray((particles.velocity if velocity is None
+                                         else velocity)[order])
         kind = particles.kind[order]
         drag, weight = kernels.fluid_drag_sum(indptr, cols, position, velocity,
                                               constants.re_laplacian, n,

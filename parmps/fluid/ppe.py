@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 DIAGONAL_ITERATIONS = 10
 
 OPTIONS_PREFIX = "pressure_"
+# The solvers that take options from the command line, by their prefix: the pressure's and
+# the implicit viscosity's (parmps.fluid.viscous).
+SOLVER_PREFIXES = ("pressure_", "viscous_")
 
 
 def _petsc():
@@ -114,19 +117,21 @@ def import_petsc4py():
 
 
 def initialise(command_line_options):
-    """Start PETSc with the command-line options that are not the pressure solver's
-    (``-log_view``); returns the pressure solver's, name (without the prefix) -> value."""
+    """Start PETSc with the command-line options that are not a solver's (``-log_view``);
+    returns the solvers', solver (``"pressure"``, ``"viscous"``) -> name (without the
+    prefix) -> value."""
     petsc4py = import_petsc4py()
-    pressure, others = split_solver_options(command_line_options)
+    solvers, others = split_solver_options(command_line_options)
     petsc4py.init(["parmps"] + others)
     petsc4py._parmps_initialised = True
-    return pressure
+    return solvers
 
 
 def split_solver_options(tokens):
-    """PETSc command-line tokens as (the pressure solver's options by name without the
-    prefix, every other token). A value follows its name unless it starts with a dash."""
-    pressure, others = {}, []
+    """PETSc command-line tokens as (each solver's options, solver -> name without the
+    prefix -> value, for the prefixes of SOLVER_PREFIXES; every other token). A value
+    follows its name unless it starts with a dash."""
+    solvers, others = {prefix[:-1]: {} for prefix in SOLVER_PREFIXES}, []
     k = 0
     while k < len(tokens):
         name = tokens[k]
@@ -135,11 +140,12 @@ def split_solver_options(tokens):
             value = tokens[k + 1]
             k += 1
         k += 1
-        if name.startswith("-" + OPTIONS_PREFIX):
-            pressure[name[1 + len(OPTIONS_PREFIX):]] = value
+        prefix = next((p for p in SOLVER_PREFIXES if name.startswith("-" + p)), None)
+        if prefix is not None:
+            solvers[prefix[:-1]][name[1 + len(prefix):]] = value
         else:
             others += [name] if value is None else [name, value]
-    return pressure, others
+    return solvers, others
 
 
 def _is_option_name(token):
@@ -202,15 +208,21 @@ def _type_names(kind):
 
 
 class PressureSolver:
-    """One KSP (CG + GAMG by default) reused for every step's pressure system."""
+    """One KSP (CG + GAMG by default) reused for every step's pressure system; with another
+    ``prefix`` and ``name`` the same machinery for another symmetric system of the particles
+    (the implicit viscosity's, :mod:`parmps.fluid.viscous`)."""
 
-    def __init__(self, comm, settings, command_line=None, dimension=2, re_laplacian=3.1):
-        """``command_line``: the pressure options given there, name (no prefix) -> value;
+    def __init__(self, comm, settings, command_line=None, dimension=2, re_laplacian=3.1,
+                 prefix=OPTIONS_PREFIX, name="pressure"):
+        """``command_line``: the solver's options given there, name (no prefix) -> value;
         ``dimension`` and ``re_laplacian`` (in l0): the Laplacian's, for the code's
-        defaults."""
+        defaults; ``prefix``: the KSP's options prefix; ``name``: the solver's, for its
+        case section and messages."""
         PETSc = _petsc()
         self.PETSc = PETSc
         self.comm = comm
+        self.prefix = prefix
+        self.name = name
         command_line = dict(command_line or {})
         self.given = sorted(set(command_line) | {name.lstrip("-") for name in settings["options"]})
         # The code's defaults follow the preconditioner that will really run.
@@ -253,11 +265,11 @@ class PressureSolver:
         for kind, known in (("ksp_type", _type_names(PETSc.KSP.Type)),
                             ("pc_type", _type_names(PETSc.PC.Type))):
             if kind in command_line:
-                value, where = command_line[kind], f"-{OPTIONS_PREFIX}{kind}"
+                value, where = command_line[kind], f"-{self.prefix}{kind}"
             elif kind in self.options:
-                value, where = self.options[kind], f"pressure.options.{kind}"
+                value, where = self.options[kind], f"{self.name}.options.{kind}"
             else:
-                value, where = self.settings[kind], f"pressure.{kind}"
+                value, where = self.settings[kind], f"{self.name}.{kind}"
             if value not in known:
                 raise CaseError(f"{where} = {value!r}: PETSc has no such type (e.g. "
                                 f"{', '.join(sorted(known)[:8])}, ...)")
@@ -267,7 +279,7 @@ class PressureSolver:
         """The solver's options in PETSc's database for the block, removed after; with
         ``report_unused``, those PETSc did not use in the block are reported."""
         database = self.PETSc.Options()
-        names = [OPTIONS_PREFIX + name for name in self.options]
+        names = [self.prefix + name for name in self.options]
         for name, value in zip(names, self.options.values()):
             database.setValue(name, value)
         try:
@@ -291,16 +303,16 @@ class PressureSolver:
     def _report_unused(self, names):
         unused = ["-" + name for name in names if name not in self.used]
         if unused and self.comm.rank == 0:
-            log.warning("PETSc option%s %s not used by the pressure solver (%s): misspelt, or "
+            log.warning("PETSc option%s %s not used by the %s solver (%s): misspelt, or "
                         "meant for another solver type", "s" if len(unused) > 1 else "",
                         ", ".join(unused) + (" were" if len(unused) > 1 else " was"),
-                        self.describe())
+                        self.name, self.describe())
 
     def _make_ksp(self):
         PETSc = self.PETSc
         settings = self.settings
         ksp = PETSc.KSP().create(comm=self.comm)
-        ksp.setOptionsPrefix(OPTIONS_PREFIX)
+        ksp.setOptionsPrefix(self.prefix)
         ksp.setType(settings["ksp_type"])
         ksp.getPC().setType(settings["pc_type"])
         ksp.setTolerances(rtol=settings["rtol"], atol=1e-50, max_it=settings["max_iterations"])
@@ -312,8 +324,8 @@ class PressureSolver:
             with self._options_inserted():
                 ksp.setFromOptions()
         except PETSc.Error as error:
-            named = ", ".join("-" + OPTIONS_PREFIX + name for name in self.given or self.options)
-            raise CaseError(f"the pressure solver's PETSc options were refused (PETSc error "
+            named = ", ".join("-" + self.prefix + name for name in self.given or self.options)
+            raise CaseError(f"the {self.name} solver's PETSc options were refused (PETSc error "
                             f"{error.ierr}): check {named}") from None
         finally:
             PETSc.Sys.popErrorHandler()
@@ -335,7 +347,7 @@ class PressureSolver:
             self.preconditioner_age, self.iterations_since_setup, self.last_iterations,
             self.setup_cost, self.reuse_limit)
 
-    def solve(self, owned, other, rhs, guess, step, ids):
+    def solve(self, owned, other, rhs, guess, step, ids, extra=None):
         """Solve A p = rhs for this rank's rows; returns (p, iterations, residual norm).
 
         ``owned``, ``other``: the rows' two CSR blocks, each (row pointers, columns,
@@ -343,13 +355,54 @@ class PressureSolver:
         ranks' columns, global (:func:`pressure_matrix`; the ranks' rows are numbered
         rank after rank). ``ids``: each row's identity (its particle's id), by which a
         preconditioner kept from an earlier layout of the rows finds them.
+        ``rhs`` and ``guess`` of shape (rows, k): k systems of the one matrix (the velocity
+        components of the implicit viscosity), solved one after the other; p is then
+        (rows, k), the iterations their sum and the residual the largest. ``extra``: None,
+        or a symmetric PETSc matrix of the same rows added to A (the implicit viscosity's
+        no-slip walls).
         """
         PETSc = self.PETSc
         matrix, csr = pressure_matrix(PETSc, self.comm, owned, other)
+        if extra is not None:
+            matrix.axpy(1.0, extra, structure=PETSc.Mat.Structure.DIFFERENT_NONZERO_PATTERN)
+            matrix.setOption(PETSc.Mat.Option.SYMMETRIC, True)
         b = matrix.createVecLeft()
         x = matrix.createVecRight()
-        b.getArray()[:] = rhs
         ids = np.asarray(ids)
+        rhs, guess = np.asarray(rhs), np.asarray(guess)
+        # The same number of systems on every rank (the solves are collective), rows or not.
+        columns = rhs[:, None] if rhs.ndim == 1 else rhs
+        guesses = guess.reshape(columns.shape)
+        solution = np.empty(columns.shape)
+        iterations, residual, reused, failure = 0, 0.0, True, None
+        for k in range(columns.shape[1]):
+            b.getArray()[:] = columns[:, k]
+            its, norm, reuse, failure = self._solve_system(matrix, b, x, guesses[:, k], step,
+                                                           ids)
+            solution[:, k] = x.getArray()
+            iterations, residual, reused = iterations + its, max(residual, norm), reused and reuse
+            if failure is not None:
+                break
+        self._let_go(matrix, reused)
+        for item in (b, x):
+            item.destroy()
+        del csr
+        if failure is not None:
+            failed, reason, its = failure
+            raise RunFailure(f"{self.name} solve diverged at step {step}: "
+                             f"{_reason_name(PETSc, failed[0])} after {failed[1]} iterations "
+                             f"(residual {failed[2]:.3e}), with a preconditioner set up for "
+                             f"this step's matrix, and {_reason_name(PETSc, reason)} after "
+                             f"{its} iterations with the diagonal alone; the run may have "
+                             f"gone unstable (lower time.cfl or time.dt_max), or the solver "
+                             f"needs other settings (e.g. -{self.prefix}pc_type hypre, "
+                             f"-{self.prefix}ksp_max_it)")
+        return solution.reshape(rhs.shape), iterations, residual
+
+    def _solve_system(self, matrix, b, x, guess, step, ids):
+        """One right-hand side ``b`` into ``x``; returns (iterations, residual norm, whether
+        the preconditioner was reused, None or the failure: ((reason, iterations, residual)
+        of the failed solve, the diagonal's reason, its iterations))."""
         reuse = not self.setup_due()
         ksp = self._fit_layout(matrix, ids, reuse)
         reason = self._solve_with(ksp, matrix, b, x, guess, reuse,
@@ -366,28 +419,14 @@ class PressureSolver:
         iterations = ksp.getIterationNumber()
         residual = ksp.getResidualNorm()
         self._count(iterations, reuse)
-        failed = None
-        if reason < 0:
-            failed = (reason, iterations, residual)
-            reason, iterations, residual = self._solve_with_diagonal(
-                matrix, b, x, guess, step, failed, ksp.getTolerances())
-            # The set-up this matrix defeated is not kept for the next step's.
-            self.fresh_iterations = None
-        solution = x.getArray().copy()
-        self._let_go(matrix, reuse)
-        for item in (b, x):
-            item.destroy()
-        del csr
-        if reason < 0:
-            raise RunFailure(f"pressure solve diverged at step {step}: "
-                             f"{_reason_name(PETSc, failed[0])} after {failed[1]} iterations "
-                             f"(residual {failed[2]:.3e}), with a preconditioner set up for "
-                             f"this step's matrix, and {_reason_name(PETSc, reason)} after "
-                             f"{iterations} iterations with the diagonal alone; the run may have "
-                             f"gone unstable (lower time.cfl or time.dt_max), or the solver "
-                             f"needs other settings (e.g. -pressure_pc_type hypre, "
-                             f"-pressure_ksp_max_it)")
-        return solution, iterations, residual
+        if reason >= 0:
+            return iterations, residual, reuse, None
+        failed = (reason, iterations, residual)
+        reason, iterations, residual = self._solve_with_diagonal(
+            matrix, b, x, guess, step, failed, ksp.getTolerances())
+        # The set-up this matrix defeated is not kept for the next step's.
+        self.fresh_iterations = None
+        return iterations, residual, reuse, None if reason >= 0 else (failed, reason, iterations)
 
     def _solve_with_diagonal(self, matrix, b, x, guess, step, failed, tolerances):
         """The step's second try when the solve fails with a preconditioner set up for its
@@ -407,7 +446,7 @@ class PressureSolver:
         PETSc = self.PETSc
         ksp = PETSc.KSP().create(comm=self.comm)
         try:
-            ksp.setOptionsPrefix(OPTIONS_PREFIX + "diagonal_")
+            ksp.setOptionsPrefix(self.prefix + "diagonal_")
             ksp.setType(PETSc.KSP.Type.CG)
             ksp.getPC().setType(PETSc.PC.Type.JACOBI)
             rtol, atol, dtol, max_it = tolerances
@@ -422,10 +461,11 @@ class PressureSolver:
         finally:
             ksp.destroy()
         if reason >= 0 and self.comm.rank == 0:
-            log.warning("step %d: the pressure solve stopped with %s after %d iterations, its "
+            log.warning("step %d: the %s solve stopped with %s after %d iterations, its "
                         "preconditioner set up for this step's matrix; solved with the "
                         "diagonal alone in %d iterations, and the next step sets its "
-                        "preconditioner up afresh", step, _reason_name(PETSc, failed[0]),
+                        "preconditioner up afresh", step, self.name,
+                        _reason_name(PETSc, failed[0]),
                         failed[1], iterations)
         return reason, iterations, residual
 

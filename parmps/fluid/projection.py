@@ -21,6 +21,7 @@ from parmps.fluid.constants import MPSConstants
 from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
                                   scheme_class)
+from parmps.fluid.viscous import ImplicitViscosity
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +29,7 @@ log = logging.getLogger(__name__)
 class Timers:
     """Seconds spent in each part of the step, for the benchmark breakdown."""
 
-    PARTS = ("neighbours", "operators", "assembly", "solve", "halo", "output")
+    PARTS = ("neighbours", "operators", "viscous", "assembly", "solve", "halo", "output")
 
     def __init__(self):
         self.seconds = dict.fromkeys(self.PARTS, 0.0)
@@ -187,6 +188,43 @@ class FluidSolver:
         self.expected_pairs = 0
         self.expected_cut = {"wide": 0, "narrow": 0}
         self.row_order = RowOrder()
+        self.viscosity_scheme = mps["viscosity_scheme"]
+        # dt <= viscous_number l0^2 / nu keeps the explicit term stable.
+        self.viscous_limit = (case["time"]["viscous_number"] * constants.spacing ** 2
+                              / constants.viscosity if constants.viscosity > 0.0 else np.inf)
+        self.implicit_viscosity = ImplicitViscosity(constants, case["viscous"], comm)
+        # The schemes this run has used so far (each is logged at its first step).
+        self.viscosity_used = set()
+        # Every local particle's velocity the last step's viscous term took, when that was
+        # implicit (u* of the moving particles): the viscous force on the bodies reads it.
+        self.viscous_velocity = None
+        self.viscous_iterations = 0
+
+    def viscosity_implicit(self, dt):
+        """Whether a step of ``dt`` takes the viscous term implicitly: always or never as
+        mps.viscosity_scheme says, or under "auto" where dt is beyond the viscous limit."""
+        if self.constants.viscosity <= 0.0 or self.viscosity_scheme == "explicit":
+            return False
+        return self.viscosity_scheme == "implicit" or dt > self.viscous_limit
+
+    def _note_viscosity(self, implicit, dt, step_number):
+        """Log each viscous scheme at the first step that uses it, with the reason."""
+        scheme = "implicit" if implicit else "explicit"
+        if scheme in self.viscosity_used or self.constants.viscosity <= 0.0:
+            return
+        self.viscosity_used.add(scheme)
+        if self.comm.rank != 0:
+            return
+        if self.viscosity_scheme != "auto":
+            why = f"mps.viscosity_scheme = \"{self.viscosity_scheme}\""
+        elif implicit:
+            why = (f"the step the other limits allow, {dt:.4g} s, is beyond the viscous limit "
+                   f"time.viscous_number l0^2/nu = {self.viscous_limit:.4g} s, which then no "
+                   f"longer limits the step")
+        else:
+            why = f"the step {dt:.4g} s is within the viscous limit {self.viscous_limit:.4g} s"
+        log.info("viscosity: %s from step %d (%s)", "backward Euler" if implicit else "explicit",
+                 step_number, why)
 
     def rows_may_move(self):
         """Whether this step's pressure rows may change ranks at no extra cost: the solve
@@ -208,6 +246,9 @@ class FluidSolver:
         nodes as particles of their own density); None: one density.
         """
         s = _Step(particles, dt, self.moving(particles.kind[:particles.n_owned]))
+        s.step_number = step_number
+        s.implicit_viscosity = self.viscosity_implicit(dt)
+        self._note_viscosity(s.implicit_viscosity, dt, step_number)
         self._search(s)
         self._predict(s)
         self._number_density(s)
@@ -216,6 +257,7 @@ class FluidSolver:
         self._correct(s, pressure, system)
         self.timers.stop()
         return {"ksp_iterations": self.last_iterations, "ksp_residual": self.last_residual,
+                "viscous_iterations": self.viscous_iterations,
                 "n_surface": int(np.count_nonzero(s.surface & s.moving))}
 
     def _search(self, s):
@@ -246,12 +288,15 @@ class FluidSolver:
         velocity_star = particles.velocity.copy()
         position_star = particles.position.copy()
         acceleration = np.broadcast_to(self.gravity, (n, c.dimension)).copy()
-        if c.viscosity > 0.0:
+        self.viscous_velocity, self.viscous_iterations = None, 0
+        if c.viscosity > 0.0 and not s.implicit_viscosity:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
                 kernels.vector_laplacian_sum(s.indptr, s.cols, particles.position,
                                              self._wall_velocity(s), c.re_laplacian, n,
                                              moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
+        if s.implicit_viscosity:
+            self._viscous_solve(s, velocity_star)
         position_star[:n][moving] += dt * velocity_star[:n][moving]
         timers.start("halo")
         self.decomposition.refresh([position_star, velocity_star], positions=(0,))
@@ -266,6 +311,25 @@ class FluidSolver:
             timers.start("halo")
             self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         s.position_star, s.velocity_star = position_star, velocity_star
+
+    def _viscous_solve(self, s, velocity_star):
+        """u* of the moving particles by the backward-Euler viscous term, in place in
+        ``velocity_star`` (which holds u^n + dt g); kept for the bodies' viscous force."""
+        timers, particles = self.timers, s.particles
+        timers.start("viscous")
+        moving_local = self.moving(particles.kind)
+
+        def refresh(arrays):
+            timers.start("halo")
+            self.decomposition.refresh(arrays)
+            timers.start("viscous")
+
+        self.implicit_viscosity.predict(particles, s.indptr, s.cols, s.cell_order,
+                                        moving_local, velocity_star, s.dt, s.step_number,
+                                        refresh)
+        self.viscous_iterations = self.implicit_viscosity.last_iterations
+        self.viscous_velocity = velocity_star.copy()
+        timers.start("operators")
 
     def _wall_velocity(self, s):
         """Every local particle's velocity as the viscous term sees it: the walls', dummies'

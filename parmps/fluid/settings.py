@@ -2,6 +2,7 @@
 
 from parmps.config import ByDimension, Key, Section
 from parmps.errors import CaseError
+from parmps.fluid.viscous import VISCOSITY_SCHEMES
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
                                   scheme_class)
 
@@ -35,6 +36,13 @@ def _mps_section():
         "shifting": Key("str", "none", choices=tuple(SHIFTINGS),
                         doc="particle shifting after the correction: \"none\" or \"fickian\" "
                             "(settings in [mps.<name>])"),
+        # docs/design.md, "Implicit viscosity": auto keeps the explicit term wherever the
+        # viscous limit does not bind, so every run that ran before runs as it did.
+        "viscosity_scheme": Key("str", "auto", choices=VISCOSITY_SCHEMES,
+                                doc="the viscous term: \"auto\" backward Euler where the "
+                                    "viscous limit (time.viscous_number) would bind the step, "
+                                    "explicit otherwise; \"explicit\" always (the step then "
+                                    "kept within the viscous limit); \"implicit\" always"),
         "compressibility": Key("float", 0.45e-9, ge=0.0, doc="c_comp [1/Pa]"),
         "clamp_negative_pressure": Key("bool", True,
                                        doc="negative pressures are set to 0 after the solve"),
@@ -86,6 +94,19 @@ SECTIONS = {
         "ksp_type": Key("str", "cg", doc="PETSc Krylov method (-pressure_ksp_type)"),
         "pc_type": Key("str", "gamg", doc="PETSc preconditioner (-pressure_pc_type)"),
         "options": Key("options", {}, doc="more PETSc options, without the pressure_ prefix"),
+    }),
+    # The implicit viscosity's system (parmps.fluid.viscous): diagonally dominant, so CG with
+    # the diagonal is enough (docs/design.md, "Implicit viscosity").
+    "viscous": Section({
+        "rtol": Key("float", 1.0e-8, gt=0.0, lt=1.0,
+                    doc="CG stops at this residual relative to the right-hand side (each "
+                        "velocity component's system)"),
+        "max_iterations": Key("int", 1000, gt=0,
+                              doc="most CG iterations of one component's solve (reaching it: "
+                                  "the solve failed)"),
+        "ksp_type": Key("str", "cg", doc="PETSc Krylov method (-viscous_ksp_type)"),
+        "pc_type": Key("str", "jacobi", doc="PETSc preconditioner (-viscous_pc_type)"),
+        "options": Key("options", {}, doc="more PETSc options, without the viscous_ prefix"),
     }),
 }
 

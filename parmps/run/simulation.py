@@ -35,8 +35,9 @@ class Simulation:
 
     def __init__(self, case, case_text, comm, directory, end_time=None, solver_options=None,
                  checkpoint=None):
-        """``solver_options``: the pressure solver's options from the command line, by
-        name without the prefix (see :func:`parmps.fluid.ppe.initialise`).
+        """``solver_options``: the solvers' options from the command line, solver
+        (``"pressure"``, ``"viscous"``) -> name without the prefix -> value (see
+        :func:`parmps.fluid.ppe.initialise`).
         ``checkpoint``: a :class:`parmps.io.checkpoint.Checkpoint` to continue from."""
         self.solver_options = dict(solver_options or {})
         self.checkpoint = checkpoint
@@ -188,10 +189,11 @@ class Simulation:
         if self.decomposition is not None:
             from parmps.fluid.ppe import PressureSolver
             self.pressure_solver = PressureSolver(
-                comm, case["pressure"], self.solver_options,
+                comm, case["pressure"], self.solver_options.get("pressure"),
                 dimension=len(case["domain"]["lower"]),
                 re_laplacian=case["mps"]["re_laplacian"])
             self.fluid.pressure_solver = self.pressure_solver
+            self.fluid.implicit_viscosity.command_line = self.solver_options.get("viscous", {})
             log.info("pressure solver: %s", self.pressure_solver.describe())
         if self.model is not None:
             dt = case["time"]["fixed_dt"] or case["time"]["dt_max"]
@@ -220,6 +222,7 @@ class Simulation:
         finally:
             if self.pressure_solver is not None:
                 self.pressure_solver.destroy()
+                self.fluid.implicit_viscosity.destroy()
         state = self.state
         if state.outcome == "interrupted":
             log.info("stopped at step %d, t = %.4g s after %.1f s", state.step, state.time,

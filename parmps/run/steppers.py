@@ -43,6 +43,9 @@ class FluidStepper:
     """The particles' MPS step on a decomposition, with the step's participants."""
 
     DIAGNOSTICS = {"ksp_iterations": np.int64, "ksp_residual": np.float64,
+                   # CG iterations of the implicit viscosity's solves (summed over the
+                   # velocity components); 0 in a step that took viscosity explicitly
+                   "viscous_iterations": np.int64,
                    "max_speed": np.float64, "kinetic_energy": np.float64,
                    # the fluid's potential energy above the initial fluid's lowest point,
                    # and kinetic plus potential [J, per metre of depth in 2D]
@@ -77,7 +80,7 @@ class FluidStepper:
         for participant in self.participants:
             self.DIAGNOSTICS.update(participant.DIAGNOSTICS)
         self.fluid_speed = 0.0
-        self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0}
+        self.stats = {"ksp_iterations": 0, "ksp_residual": 0.0, "viscous_iterations": 0}
         self.step_imbalance = 1.0
         constants = fluid.constants
         self.particle_mass = constants.density * constants.spacing ** constants.dimension
@@ -167,8 +170,10 @@ class FluidStepper:
                                 f"{settings['cfl'] * self.spacing / speed:.4g} s "
                                 f"(time.cfl = {settings['cfl']:g})"))
         viscosity = self.fluid.constants.viscosity
-        if viscosity > 0:
-            seconds = settings["viscous_number"] * self.spacing ** 2 / viscosity
+        # Under mps.viscosity_scheme "auto" a step beyond the viscous limit takes the
+        # viscous term implicitly (FluidSolver.viscosity_implicit): the limit limits nothing.
+        if viscosity > 0 and self.fluid.viscosity_scheme == "explicit":
+            seconds = self.fluid.viscous_limit
             limits.append(Limit("viscous", seconds,
                                 f"fluid.viscosity = {viscosity:g} m^2/s needs dt <= "
                                 f"time.viscous_number x spacing^2 / viscosity = {seconds:.4g} s"))
@@ -310,6 +315,7 @@ class FluidStepper:
         kinetic, potential, work, n_fluid, field_work = comm.allreduce(sums)
         values = {"ksp_iterations": self.stats["ksp_iterations"],
                   "ksp_residual": self.stats["ksp_residual"],
+                  "viscous_iterations": self.stats["viscous_iterations"],
                   "max_speed": self.fluid_speed, "kinetic_energy": kinetic,
                   "potential_energy": potential, "fluid_energy": kinetic + potential,
                   "boundary_work": work,

@@ -323,7 +323,8 @@ class _WarmTally:
         from mpi4py import MPI
         timers, decomposition, marks = self.run.fluid.timers, self.run.decomposition, self.marks
         parts = {part: timers.seconds[part] - marks["fluid"][part]
-                 for part in ("neighbours", "operators", "assembly", "solve", "output")}
+                 for part in ("neighbours", "operators", "viscous", "assembly", "solve",
+                              "output")}
         parts["halo"] = decomposition.halo_seconds - marks["halo"]
         parts["migration"] = decomposition.migration_seconds - marks["migration"]
         # The rest of the step: the bodies' substeps, the coupling, the driver's phases.
