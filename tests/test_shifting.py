@@ -146,9 +146,9 @@ def _stabilisation(d, **settings):
 @pytest.mark.parametrize("d", [2, 3])
 def test_the_dynamic_stabilisation_takes_a_still_pair_back_to_its_distance(d):
     """With separation 1, two fluid particles at rest 0.6 l0 apart (0.8 l0 the distance):
-    after the change and the step's move they stand 0.8 l0 apart, to 1e-12 l0, with opposite velocities; beside a
-    fixed partner the fluid particle alone moves, the whole way; a body's node is left
-    out."""
+    after the change and the step's move they stand 0.8 l0 apart, to 1e-12 l0, with
+    opposite velocities; beside a fixed partner the fluid particle alone moves, the whole
+    way; a body's node is left out."""
     stabilisation = _stabilisation(d, separation=1.0)
     dt = 1e-3
     position = np.zeros((2, d))

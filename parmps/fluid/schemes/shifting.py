@@ -29,9 +29,10 @@ lattice, so the source sees the flow's compression, not the particles' disorder.
   that distance in one step (``kernels.stabilisation_change``; the form here is this
   solver's reading of the idea, not the paper's formula, which was not at hand). Two
   fluid particles share it equally, so momentum is kept; a particle takes the whole of
-  it from a wall (bodies' nodes are left out). The position follows the velocity (``dt`` times the change), as the
-  correction's does. With ``separation`` = 0 it only stops the approach of such pairs,
-  which no pair's kinetic energy can gain from.
+  it from a wall (bodies' nodes are left out). The position follows the velocity (``dt``
+  times the change), as the correction's does. With ``separation`` = 0 (the default) it
+  only stops the approach of such pairs: each pair's exchange alone takes kinetic
+  energy and never gives it.
 
 Every scheme answers ``regularise(...)``: the position and velocity changes of the owned
 rows (None: no change).
