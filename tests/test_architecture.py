@@ -107,7 +107,7 @@ def test_every_registered_scheme_loads_and_declares_its_settings():
     assert set(SOURCES) >= {"density_rate", "compensated_rate", "density_acceleration"}
     assert set(LAPLACIANS) >= {"standard", "higher_order"}
     assert set(SURFACES) >= {"dirichlet", "extrapolated"}
-    assert set(SHIFTINGS) >= {"none", "fickian"}
+    assert set(SHIFTINGS) >= {"none", "fickian", "dynamic_stabilisation"}
     # one [mps.<name>] table each
     names = [*SOURCES, *LAPLACIANS, *GRADIENTS, *SURFACES, *SHIFTINGS]
     assert len(set(names)) == len(names)
@@ -115,7 +115,7 @@ def test_every_registered_scheme_loads_and_declares_its_settings():
         assert isinstance(scheme.KEYS, dict)
         assert (hasattr(scheme, "rhs") or hasattr(scheme, "rows")
                 or hasattr(scheme, "gradient") or hasattr(scheme, "unknowns")
-                or hasattr(scheme, "shift")), name
+                or hasattr(scheme, "regularise")), name
     case = _validated()
     for name in names:
         assert isinstance(case["mps"][name], dict)

@@ -11,6 +11,7 @@ import pytest
 from parmps.core import kernels
 from parmps.core.lattice import smooth_reference
 from parmps.core.neighbours import pair_list
+from parmps.core.particles import FLUID, SOLID, WALL
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.schemes import SHIFTINGS, scheme_class
 
@@ -134,3 +135,71 @@ def test_the_fickian_shift_keeps_only_the_surface_component_near_a_free_surface(
     assert np.all(np.abs(shift[near & top, -1]) <= 0.3 * length[near & top] + 1e-300)
     deep = rows & ~near
     assert np.abs(shift[deep, -1]).max() > 0.3 * length[deep].max()
+
+
+def _stabilisation(d, **settings):
+    cls = scheme_class(SHIFTINGS, "dynamic_stabilisation")
+    defaults = {key: spec.default for key, spec in cls.KEYS.items()}
+    return cls({**defaults, **settings}, _constants(d))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_dynamic_stabilisation_takes_a_still_pair_back_to_its_distance(d):
+    """With separation 1, two fluid particles at rest 0.6 l0 apart (0.8 l0 the distance):
+    after the change and the step's move they stand 0.8 l0 apart, to 1e-12 l0, with
+    opposite velocities; beside a fixed partner the fluid particle alone moves, the whole
+    way; a body's node is left out."""
+    stabilisation = _stabilisation(d, separation=1.0)
+    dt = 1e-3
+    position = np.zeros((2, d))
+    position[1, 0] = 0.6 * SPACING
+    velocity = np.zeros((2, d))
+    indptr, cols = pair_list(position, 3 * SPACING)
+    for kind, expected in (([FLUID, FLUID], 0.1), ([FLUID, WALL], 0.2)):
+        shift, change = stabilisation.regularise(indptr, cols, position, velocity, None, None,
+                                                 np.array(kind, np.int8), dt, 2)
+        moved = position + shift
+        assert np.linalg.norm(moved[1] - moved[0]) == pytest.approx(0.8 * SPACING,
+                                                                    abs=1e-12 * SPACING)
+        assert shift[0, 0] == pytest.approx(-expected * SPACING, abs=1e-12 * SPACING)
+        assert np.allclose(shift, dt * change, rtol=0, atol=1e-15)
+        if kind[1] == FLUID:
+            assert np.allclose(change.sum(axis=0), 0.0, rtol=0, atol=1e-12)
+    _, change = stabilisation.regularise(indptr, cols, position, velocity, None, None,
+                                         np.array([FLUID, SOLID], np.int8), dt, 2)
+    assert np.all(change == 0.0)
+
+
+@pytest.mark.parametrize("d, side", [(2, 12), (3, 6)])
+def test_the_dynamic_stabilisation_keeps_momentum_and_leaves_a_lattice(d, side):
+    """On a lattice jittered by 0.3 l0 with random velocities every close pair shares its
+    change: the changes sum to zero (1e-12 of the largest); with separation 0 only pairs
+    that approach change, and each two-particle exchange loses kinetic energy; on the
+    regular lattice (every pair at l0 or more) nothing changes."""
+    dt = 1e-3
+    rng = np.random.default_rng(7)
+    position = _lattice(d, side, jitter=0.3, seed=2)
+    n = len(position)
+    velocity = rng.normal(0.0, 0.1 * SPACING / dt, position.shape)
+    indptr, cols = pair_list(position, 3 * SPACING)
+    kind = np.full(n, FLUID, np.int8)
+    for separation in (1.0, 0.0):
+        _, change = _stabilisation(d, separation=separation).regularise(
+            indptr, cols, position, velocity, None, None, kind, dt, n)
+        largest = np.abs(change).max()
+        assert largest > 0.0
+        assert np.abs(change.sum(axis=0)).max() < 1e-12 * largest * n
+    pair = np.array([[0.0] * d, [0.7 * SPACING] + [0.0] * (d - 1)])
+    approach = np.zeros((2, d))
+    approach[0, 0], approach[0, -1] = 1.0, 0.5
+    indptr2, cols2 = pair_list(pair, 3 * SPACING)
+    _, change = _stabilisation(d, separation=0.0).regularise(
+        indptr2, cols2, pair, approach, None, None, np.full(2, FLUID, np.int8), dt, 2)
+    after = approach + change
+    assert after[1, 0] - after[0, 0] == pytest.approx(0.0, abs=1e-15)
+    assert (after ** 2).sum() < (approach ** 2).sum()
+    full = _lattice(d, side)
+    indptr, cols = pair_list(full, 3 * SPACING)
+    _, change = _stabilisation(d).regularise(indptr, cols, full, velocity, None, None,
+                                             kind, dt, n)
+    assert np.all(change == 0.0)

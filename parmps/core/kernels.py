@@ -948,6 +948,55 @@ def collision_change(indptr, cols, position, velocity, moving, distance_limit, r
                              restitution, n_rows, 3, start)
 
 
+@numba.njit(cache=True, inline="always")
+def _stabilisation_change(indptr, cols, position, velocity, moving, fixed, distance,
+                          separation, dt, n_rows, d):
+    out = np.zeros((n_rows, d))
+    limit2 = distance * distance
+    for i in range(n_rows):
+        if not moving[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not (moving[j] or fixed[j]):
+                continue
+            r2 = pair_distance2(position, i, j, d)
+            if r2 >= limit2 or r2 <= 0.0:
+                continue
+            r = np.sqrt(r2)
+            # w: the pair's separation speed along e = r_ij / r; wanted: enough to be
+            # ``separation`` of the way back to ``distance`` by the end of the next step.
+            w = 0.0
+            for k in range(d):
+                w += (velocity[j, k] - velocity[i, k]) * (pair_component(position, i, j, k) / r)
+            change = separation * (distance - r) / dt - w
+            if change <= 0.0:
+                continue
+            # Two moving particles share the change (equal masses: momentum kept); a
+            # fixed partner is infinitely heavy and i takes all of it.
+            share = 0.5 if moving[j] else 1.0
+            for k in range(d):
+                out[i, k] -= share * change * (pair_component(position, i, j, k) / r)
+    return out
+
+
+def stabilisation_change(indptr, cols, position, velocity, moving, fixed, distance,
+                         separation, dt, n_rows):
+    """Velocity changes of the moving rows [0, n_rows) from the pairs closer than
+    ``distance`` at ``position`` with a moving or a ``fixed`` partner (others are left
+    out): each such pair whose separation speed along its line is
+    below ``separation (distance - r) / dt`` is given that speed, shared equally between two
+    moving particles (their momentum is kept), taken whole by a moving particle from a fixed
+    partner. ``separation`` = 0 only stops the approach (no pair gains kinetic energy).
+    Uses the velocities before any change, so the result is independent of pair order."""
+    _check_dimension(position.shape[1])
+    if position.shape[1] == 2:
+        return _stabilisation_change(indptr, cols, position, velocity, moving, fixed,
+                                     distance, separation, dt, n_rows, 2)
+    return _stabilisation_change(indptr, cols, position, velocity, moving, fixed, distance,
+                                 separation, dt, n_rows, 3)
+
+
 # A row of the pressure matrix that is an unknown free-surface particle (is_unknown's value).
 SURFACE_ROW = 2
 

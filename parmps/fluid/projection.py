@@ -517,19 +517,24 @@ class FluidSolver:
         return bearing | wet.view(bool)
 
     def _shift(self, particles, indptr, cols, position, velocity, surface, dt):
-        """Move the owned fluid particles by the shifting scheme's shift (in place), from
-        the corrected positions; ``surface``: the owned free-surface particles of the step."""
+        """Move the owned fluid particles by the shifting scheme's regularisation (in
+        place), from the corrected positions and velocities; ``surface``: the owned
+        free-surface particles of the step."""
         timers = self.timers
         n = particles.n_owned
         fluid = particles.kind == FLUID
         on_surface = np.zeros(len(particles), np.int8)
         on_surface[:n] = surface & fluid[:n]
         timers.start("halo")
-        self.decomposition.refresh([position, on_surface], positions=(0,))
+        self.decomposition.refresh([position, velocity, on_surface], positions=(0,))
         timers.start("operators")
-        shift = self.shifting.shift(indptr, cols, position, velocity, on_surface.view(bool),
-                                    fluid[:n], dt, n)
-        position[:n] += shift
+        shift, change = self.shifting.regularise(
+            indptr, cols, position, velocity, on_surface.view(bool), fluid[:n],
+            particles.kind, dt, n)
+        if shift is not None:
+            position[:n] += shift
+        if change is not None:
+            velocity[:n] += change
 
 
 def max_speed(particles, comm):

@@ -44,6 +44,7 @@ SURFACES = {
 SHIFTINGS = {
     "none": "parmps.fluid.schemes.shifting:NoShifting",
     "fickian": "parmps.fluid.schemes.shifting:FickianShifting",
+    "dynamic_stabilisation": "parmps.fluid.schemes.shifting:DynamicStabilisation",
 }
 
 
