@@ -139,13 +139,3 @@ def owned_fluid_near(particles, low, high, domain=None):
     rows = np.flatnonzero(((kind == FLUID) | (kind == INFLOW))
                           & np.all((position >= low) & (position <= high), axis=1))
     return rows, position[rows]
-
-
-def owned_fluid_in_box(particles, low, high):
-    """Indices of the owned fluid and inflow particles (those the flow carries) within the
-    box [low, high]: where a body's checks and counts look before their costlier tests."""
-    n = particles.n_owned
-    kind = particles.kind[:n]
-    return np.flatnonzero(((kind == FLUID) | (kind == INFLOW))
-                          & np.all((particles.position[:n] >= low)
-                                   & (particles.position[:n] <= high), axis=1))
