@@ -649,20 +649,29 @@ def _timed_run(args, scene_name, spacing, ranks):
     return json.loads(lines[-1])
 
 
+def _paired_runs(args, scenes, ranks, figure):
+    """``figure`` of each of ``scenes`` (a pair), run in turn twice (A B A B) on ``ranks``
+    ranks, one JSON line per run: {scene: [figure, figure]}, or None when a run failed."""
+    found = {scene_name: [] for scene_name in scenes}
+    for _ in range(2):
+        for scene_name in scenes:
+            line = _timed_run(args, scene_name, BODY_SPACING, ranks)
+            print(json.dumps(dict(line, scene=scene_name)), flush=True)
+            if "error" in line:
+                return None
+            found[scene_name].append(line[figure])
+    return found
+
+
 def solid_cost(args):
     """The submerged body's share of the step: the tank with the body and the tank with
     water in its place, paired (A B A B) on each rank count; one JSON line per run, then
     the summary against SOLID_COST_TARGET."""
     status = 0
     for ranks in args.ranks or [1]:
-        seconds = {"body_3d_fluid": [], "body_3d": []}
-        for _ in range(2):
-            for scene_name in seconds:
-                line = _timed_run(args, scene_name, BODY_SPACING, ranks)
-                print(json.dumps(dict(line, scene=scene_name)), flush=True)
-                if "error" in line:
-                    return 1
-                seconds[scene_name].append(line["seconds"])
+        seconds = _paired_runs(args, ("body_3d_fluid", "body_3d"), ranks, "seconds")
+        if seconds is None:
+            return 1
         fluid, body = (sum(seconds[name]) for name in ("body_3d_fluid", "body_3d"))
         cost = body / fluid - 1.0
         status = status or int(cost > SOLID_COST_TARGET)
@@ -675,21 +684,16 @@ def solid_cost(args):
     return status
 
 
-
 def periodic_cost(args):
     """Periodicity's cost per particle-step: the periodic duct and the open one, paired
     (A B A B) on each rank count; one JSON line per run, then the summary against
     PERIODIC_COST_TARGET."""
     status = 0
     for ranks in args.ranks or [1]:
-        cost = {"duct_open": [], "duct_periodic": []}
-        for _ in range(2):
-            for scene_name in cost:
-                line = _timed_run(args, scene_name, BODY_SPACING, ranks)
-                print(json.dumps(dict(line, scene=scene_name)), flush=True)
-                if "error" in line:
-                    return 1
-                cost[scene_name].append(line["us_per_particle_step"])
+        cost = _paired_runs(args, ("duct_open", "duct_periodic"), ranks,
+                            "us_per_particle_step")
+        if cost is None:
+            return 1
         ratio = [p / o for p, o in zip(cost["duct_periodic"], cost["duct_open"])]
         extra = statistics.median(ratio) - 1.0
         status = status or int(extra > PERIODIC_COST_TARGET)
@@ -698,6 +702,7 @@ def periodic_cost(args):
                           "periodic_cost": round(extra, 4), "target": PERIODIC_COST_TARGET,
                           "within_target": extra <= PERIODIC_COST_TARGET}), flush=True)
     return status
+
 
 if __name__ == "__main__":
     sys.exit(main())
