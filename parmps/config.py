@@ -311,6 +311,24 @@ def apply_override(raw, assignment):
     return raw
 
 
+def resolve_file_paths(raw, case_file, sections, key):
+    """Make the relative paths under ``key`` of the entries of ``sections`` of a parsed case
+    absolute, from the directory of ``case_file`` (a stored case then finds its files from
+    anywhere); returns whether any changed."""
+    import os
+
+    base = os.path.dirname(os.path.abspath(case_file))
+    changed = False
+    for section in sections:
+        entries = raw.get(section, [])
+        for entry in entries if isinstance(entries, list) else [entries]:
+            path = entry.get(key) if isinstance(entry, dict) else None
+            if isinstance(path, str) and path and not os.path.isabs(path):
+                entry[key] = os.path.normpath(os.path.join(base, path))
+                changed = True
+    return changed
+
+
 def load_text(text, source="case"):
     """Parse TOML text; a syntax error becomes a one-line CaseError."""
     try:

@@ -22,15 +22,9 @@ from parmps.core.particles import FLUID
 from parmps.geometry import scene
 from parmps.geometry.domain import Domain
 from parmps.io.frames import read_frames
-from parmps.parallel.periodic import PeriodicImages
 
 CHANNEL = Path(__file__).parent / "cases" / "periodic_channel.toml"
 TIGHT = ["-pressure_ksp_rtol", "1e-12"]
-
-
-class _OneRank:
-    size = 1
-    rank = 0
 
 
 def test_wrap_moves_only_what_is_past_the_margin():
@@ -51,8 +45,7 @@ def test_minimum_image_brings_each_periodic_component_within_half_a_period():
 
 def test_images_of_a_corner_particle_cover_both_faces_and_the_corner():
     domain = Domain([0.0, 0.0], [1.0, 1.0], periodic=[0, 1])
-    images = PeriodicImages(_OneRank(), domain, halo_width=0.1)
-    index, shift = images.candidates(np.array([[0.05, 0.95], [0.5, 0.5]]))
+    index, shift = domain.images(np.array([[0.05, 0.95], [0.5, 0.5]]), 0.1)
     assert set(index) == {0}
     assert sorted(map(tuple, shift)) == [(0.0, -1.0), (1.0, -1.0), (1.0, 0.0)]
 

@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 
-from parmps.config import ZERO, Key, PerDimension, Section, check_ordered_box
+from parmps.config import (ZERO, Key, PerDimension, Section, check_ordered_box,
+                           resolve_file_paths)
 from parmps.core.timeseries import read_table
 from parmps.errors import CaseError
 
@@ -173,14 +174,4 @@ def inflow_table(name, inlet):
 def resolve_paths(raw, case_file):
     """Make the inlets' relative table paths of a parsed case absolute, from the directory of
     ``case_file``; returns whether any changed."""
-    import os
-
-    base = os.path.dirname(os.path.abspath(case_file))
-    changed = False
-    entries = raw.get("inlet", [])
-    for entry in entries if isinstance(entries, list) else [entries]:
-        path = entry.get("table") if isinstance(entry, dict) else None
-        if isinstance(path, str) and path and not os.path.isabs(path):
-            entry["table"] = os.path.normpath(os.path.join(base, path))
-            changed = True
-    return changed
+    return resolve_file_paths(raw, case_file, ("inlet",), "table")

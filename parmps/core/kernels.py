@@ -269,46 +269,12 @@ def vector_laplacian_sum(indptr, cols, position, field, radius, n_rows, rows=Non
 
 
 @numba.njit(cache=True, inline="always")
-def _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, d):
-    out = velocity[:n_rows].copy()
-    for i in range(n_rows):
-        if is_fluid[i]:
-            continue
-        total = 0.0
-        mean = np.zeros(d)
-        for p in range(indptr[i], indptr[i + 1]):
-            j = cols[p]
-            if not is_fluid[j]:
-                continue
-            w = _weight_of_r2(pair_distance2(position, i, j, d), radius)
-            if w > 0.0:
-                total += w
-                for k in range(d):
-                    mean[k] += w * velocity[j, k]
-        if total > 0.0:
-            for k in range(d):
-                out[i, k] = 2.0 * velocity[i, k] - mean[k] / total
-    return out
-
-
-@numba.njit(cache=True)
-def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid):
-    """The velocity the viscous term sees at the rows ``n_rows``: a fluid particle's own; a
-    wall's, dummy's or body node's ``2 u_i - <u>_i``, ``<u>_i`` the mean of its fluid
-    neighbours' velocities weighted by w(r) (its own where it has none), so that the
-    velocity extrapolated across the wall's surface meets the wall's there (Adami, Hu &
-    Adams 2012's no-slip wall)."""
-    _check_dimension(position.shape[1])
-    if position.shape[1] == 2:
-        return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 2)
-    return _no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
-
-
-@numba.njit(cache=True, inline="always")
-def _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, d):
+def _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, rows, d):
     out = np.zeros((n_rows, d))
     weights = np.zeros(n_rows)
     for i in range(n_rows):
+        if rows is not None and not rows[i]:
+            continue
         for p in range(indptr[i], indptr[i + 1]):
             j = cols[p]
             if not is_fluid[j]:
@@ -322,14 +288,33 @@ def _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, 
 
 
 @numba.njit(cache=True)
-def fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+def fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, rows=None):
     """``(sum_j (u_j - u_i) w_ij, sum_j w_ij)`` over the fluid neighbours j of the rows
-    ``n_rows``: what the no-slip wall's viscous force on a wall, body or node particle is
-    made of (:func:`no_slip_velocity`)."""
+    ``n_rows`` (those ``rows`` selects; the others 0): what the no-slip wall's viscous force
+    on a wall, body or node particle is made of (:func:`no_slip_velocity`)."""
     _check_dimension(position.shape[1])
     if position.shape[1] == 2:
-        return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, 2)
-    return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, 3)
+        return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid,
+                               rows, 2)
+    return _fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid, rows, 3)
+
+
+@numba.njit(cache=True)
+def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+    """The velocity the viscous term sees at the rows ``n_rows``: a fluid particle's own; a
+    wall's, dummy's or body node's ``2 u_i - <u>_i``, ``<u>_i`` the mean of its fluid
+    neighbours' velocities weighted by w(r) (its own where it has none), so that the
+    velocity extrapolated across the wall's surface meets the wall's there (Adami, Hu &
+    Adams 2012's no-slip wall). From :func:`fluid_drag_sum`: ``2 u_i - <u>_i = u_i -
+    sum_j w_ij (u_j - u_i) / sum_j w_ij``."""
+    drag, weight = fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid,
+                                  ~is_fluid[:n_rows])
+    out = velocity[:n_rows].copy()
+    for i in range(n_rows):
+        if weight[i] > 0.0:
+            for k in range(out.shape[1]):
+                out[i, k] -= drag[i, k] / weight[i]
+    return out
 
 
 # --- divergence -------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """Case sections of the geometry: the fluid blocks, and the walls of any shape."""
 
 from parmps.boundaries.settings import MOTION_KEYS
-from parmps.config import ZERO, Key, Section, check_ordered_box
+from parmps.config import ZERO, Key, Section, check_ordered_box, resolve_file_paths
 from parmps.errors import CaseError
 from parmps.geometry.walls import check_shape_keys
 
@@ -95,15 +95,4 @@ def check(case):
 def resolve_paths(raw, case_file):
     """Make the meshes' relative paths of a parsed case absolute, from the directory of
     ``case_file``; returns whether any changed."""
-    import os
-
-    base = os.path.dirname(os.path.abspath(case_file))
-    changed = False
-    for section in SECTIONS:
-        entries = raw.get(section, [])
-        for entry in entries if isinstance(entries, list) else [entries]:
-            path = entry.get("mesh") if isinstance(entry, dict) else None
-            if isinstance(path, str) and path and not os.path.isabs(path):
-                entry["mesh"] = os.path.normpath(os.path.join(base, path))
-                changed = True
-    return changed
+    return resolve_file_paths(raw, case_file, SECTIONS, "mesh")

@@ -38,11 +38,6 @@ class PeriodicImages:
         self._send_counts = np.zeros(self.comm.size, np.int64)
         self._recv_counts = np.zeros(self.comm.size, np.int64)
 
-    def candidates(self, position):
-        """(index, shift) of every image of the rows of ``position``
-        (:meth:`parmps.geometry.domain.Domain.images` within the halo width)."""
-        return self.domain.images(position, self.halo_width)
-
     def destinations(self, image_position, boxes):
         """(image rows, rank) of every image within the halo width of a rank's region;
         ``boxes``: (lower, upper) corners of each rank's region, +-inf where open."""
@@ -59,7 +54,7 @@ class PeriodicImages:
         """``halo`` (owned rows then the decomposition's ghosts) with this rank's share of
         every rank's images appended; collective. Remembers what went where for refresh."""
         position = halo.position[:n_owned]
-        index, shift = self.candidates(position)
+        index, shift = self.domain.images(position, self.halo_width)
         rows, rank = self.destinations(position[index] + shift, boxes)
         order = np.argsort(rank, kind="stable")
         self._index, self._shift = index[rows[order]], shift[rows[order]]

@@ -116,7 +116,7 @@ class FluidStepper:
                            "initial": np.nan if self.initial_energy is None
                            else self.initial_energy,
                            "lowest": np.nan if self.lowest_budget is None
-                           else self.lowest_budget, "scale": self.rise_scale}
+                           else self.lowest_budget}
         return saved
 
     def restore_state(self, saved):
@@ -137,8 +137,8 @@ class FluidStepper:
             if not np.isnan(saved["energy"]["initial"]):
                 self.initial_energy = float(saved["energy"]["initial"])
                 self.lowest_budget = float(saved["energy"]["lowest"])
-                self.rise_scale = float(saved["energy"].get("scale",
-                                                            abs(self.initial_energy)))
+                # The next diagnostics row brings the work done so far into it.
+                self.rise_scale = abs(self.initial_energy)
 
     def start(self, state):
         # The largest fluid speed; the check after each step measures it for the next.
