@@ -8,12 +8,8 @@ one section per public module of the package.
 import os
 import pkgutil
 import re
-import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(HERE))
-
-import parmps  # noqa: E402
+import parmps  # scripts/setup installs it (editable) into the venv scripts/docs uses
 
 project = "parmps"
 author = "the parmps developers"

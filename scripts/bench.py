@@ -5,12 +5,9 @@
     scripts/bench.py --time-to-solution [--spacing L0 ...] [--ranks R ...] [--end-time T]
 """
 
-import os
 import sys
 
-sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-
-from parmps.cli import main  # noqa: E402
+from parmps.cli import main
 
 if __name__ == "__main__":
     sys.exit(main(["bench"] + sys.argv[1:]))

@@ -28,10 +28,9 @@ import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-from parmps.validation import launch  # noqa: E402
-from parmps.validation.presets import COMPARED, SCHEMES  # noqa: E402
+from parmps.validation import launch
+from parmps.validation.presets import COMPARED, SCHEMES
 
 PARTS = ("tank1cm", "tank5mm", "lobovsky", "box", "membrane", "cost")
 

@@ -17,11 +17,10 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-from parmps import validation  # noqa: E402
-from parmps.core.particles import FLUID, SOLID  # noqa: E402
-from parmps.tools import analysis  # noqa: E402
+from parmps import validation
+from parmps.core.particles import FLUID, SOLID
+from parmps.tools import analysis
 
 
 def frames_near(path, times):

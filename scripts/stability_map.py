@@ -30,11 +30,10 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-from parmps import validation  # noqa: E402
-from parmps.tools import analysis  # noqa: E402
-from parmps.validation import launch  # noqa: E402
+from parmps import validation
+from parmps.tools import analysis
+from parmps.validation import launch
 
 
 def run(case, out, sets=(), end_time=None, petsc=(), ranks=1, timeout=600):

@@ -31,13 +31,12 @@ import time
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
-from parmps import validation  # noqa: E402
-from parmps.tools import analysis  # noqa: E402
-from parmps.validation import launch  # noqa: E402
-from parmps.validation.presets import SCHEMES, STUDIED  # noqa: E402
-from parmps.tools.analysis import log_slope as slope  # noqa: E402
+from parmps import validation
+from parmps.tools import analysis
+from parmps.validation import launch
+from parmps.validation.presets import SCHEMES, STUDIED
+from parmps.tools.analysis import log_slope as slope
 
 # The pressure schemes of the sweeps: presets of the package's one table.
 PRESSURE_SCHEMES = {label: SCHEMES[label] for label in STUDIED}

@@ -20,7 +20,6 @@ import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, ROOT)
 
 
 # The plots' running mean of the probes, in t sqrt(g/H).

@@ -12,14 +12,10 @@ w_s (1 - cos omega_1 t), w_s = P L^3/3EI; exits 1 when the period misses the tol
 
 import argparse
 import math
-import os
 import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
-
-from parmps import validation  # noqa: E402
-from parmps.tools import analysis  # noqa: E402
+from parmps import validation
+from parmps.tools import analysis
 
 
 def main():

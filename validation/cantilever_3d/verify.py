@@ -9,13 +9,8 @@ load and under the beam's weight, and of omega_1 (parmps.tools.elastic_3d).
 """
 
 import argparse
-import os
-import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
-
-from parmps.tools import elastic_3d  # noqa: E402
+from parmps.tools import elastic_3d
 
 
 def main():

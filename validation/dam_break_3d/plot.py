@@ -17,12 +17,7 @@ missed.
 """
 
 import argparse
-import math
-import os
 import sys
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
 
 def judge(metrics, tolerance):

@@ -13,19 +13,14 @@ lower row shows the particles within one spacing of the tank's mid-width at four
 """
 
 import argparse
-import os
 import sys
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-ROOT = os.path.dirname(os.path.dirname(HERE))
-sys.path.insert(0, ROOT)
-
-from parmps import validation  # noqa: E402
-from parmps.core.particles import FLUID, SOLID  # noqa: E402
-from parmps.result import result_path  # noqa: E402
-from parmps.tools import analysis  # noqa: E402
+from parmps import validation
+from parmps.core.particles import FLUID, SOLID
+from parmps.result import result_path
+from parmps.tools import analysis
 
 
 def mid_width_slices(path, times):

@@ -21,12 +21,11 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
-sys.path.insert(0, ROOT)
 
-from parmps import config, schema  # noqa: E402
-from parmps.solids.mass_spring.build import build_bodies  # noqa: E402
+from parmps import config, schema
+from parmps.solids.mass_spring.build import build_bodies
 from parmps.solids.mass_spring.statics import static_displacement, stiffness_matrix  # noqa
-from parmps.tools import gate_statics  # noqa: E402
+from parmps.tools import gate_statics
 
 CASE = os.path.join(ROOT, "cases", "elastic_gate_3d.toml")
 LATTICE_POISSON = 0.25

@@ -12,13 +12,8 @@ hydrostatic_3d.md). Works for the 2D tank too (y up).
 """
 
 import argparse
-import os
-import sys
 
 import numpy as np
-
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
 
 
 def profile(path, settle_time):

@@ -10,13 +10,8 @@ the averaging window and Kirchhoff's 0.00126 q a^4 / D with the 5 % band.
 """
 
 import argparse
-import os
-import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
-
-from parmps import validation  # noqa: E402
+from parmps import validation
 
 
 def main():

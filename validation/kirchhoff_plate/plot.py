@@ -10,13 +10,8 @@ lattice's own (its twisting stiffness, docs/elastic_lattice.md).
 """
 
 import argparse
-import os
-import sys
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.dirname(os.path.dirname(HERE)))
-
-from parmps.tools import elastic_3d  # noqa: E402
+from parmps.tools import elastic_3d
 
 PLATES = {3: (20, 30, 40), 4: (20, 30, 40)}  # nodes through t -> a/t
 
