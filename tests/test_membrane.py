@@ -247,3 +247,24 @@ def test_a_membrane_folded_over_stops_the_run_naming_the_node_and_the_settings()
     with pytest.raises(RunFailure, match=r"body 'cell': its membrane folded over at node "
                                          r"\d+ .*bending_modulus.*solid.safety"):
         m.check("cell", folded)
+
+
+def test_a_membrane_pressed_through_itself_stops_the_run_though_no_triangle_folded():
+    """The top face's dimple pushed smoothly through the bottom face: every dihedral turns
+    little (the fold check is silent), but edges of the top face pierce the bottom's."""
+    vertices, triangles = red_blood_cell(frequency=8, base="icosahedron")
+    m = _membrane(vertices, triangles)
+    m.check("cell", vertices)                      # at rest: nothing to say
+    assert membrane_kernels.first_crossing(vertices, m.edges, m.triangles,
+                                           1.0e-6) == (-1, -1)
+    pressed = vertices.copy()
+    rho2 = vertices[:, 0] ** 2 + vertices[:, 1] ** 2
+    top = vertices[:, 2] > 0
+    depth = 2.0 * vertices[top, 2][np.argmin(rho2[top])]      # twice the half-thickness
+    pressed[top, 2] -= 1.5 * depth * np.exp(-rho2[top] / (1.5e-6) ** 2)
+    turn = np.abs(membrane.dihedral_angles(pressed, m.quads) - m.rest_angle)
+    assert turn.max() < membrane.FOLD_LIMIT
+    with pytest.raises(RunFailure, match=r"body 'cell': its membrane passed through itself: "
+                                         r"the edge at node \d+ crosses the triangle at node "
+                                         r"\d+: raise bending_modulus.*solid.safety"):
+        m.check("cell", pressed)

@@ -316,6 +316,24 @@ class Membrane:
                 f"(two triangles turned {math.degrees(turn[worst]):.0f} degrees from "
                 f"rest): raise bending_modulus, refine the shell, or shorten "
                 f"the substep (solid.safety)")
+        self.check_crossing(name, position)
+
+    def check_crossing(self, name, position):
+        """Stop a membrane that passed through itself (an edge through one of its own
+        triangles: two faces crossed, which no dihedral shows where they are far apart on
+        the surface), naming the body, a node of each and the settings to change."""
+        edges = self.edges
+        length = np.linalg.norm(position[edges[:, 0]] - position[edges[:, 1]], axis=1)
+        # Cells no smaller than the longest edge, and at most ~100 along the body.
+        cell = max(float(length.max()), float(np.ptp(position, axis=0).max()) / 100.0)
+        edge, triangle = kernels.first_crossing(position, edges, self.triangles, cell)
+        if edge >= 0:
+            raise RunFailure(
+                f"body '{name}': its membrane passed through itself: the edge at node "
+                f"{int(edges[edge, 0])} crosses the triangle at node "
+                f"{int(self.triangles[triangle, 0])}: raise bending_modulus (or the loads "
+                f"that press its faces together are too large), refine the shell, or "
+                f"shorten the substep (solid.safety)")
 
 
 # A triangle turned this far against its neighbour [rad] has inverted: the surface folds.

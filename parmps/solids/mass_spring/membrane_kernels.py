@@ -331,3 +331,111 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
                 acceleration[p, m] = force[p, m] * inverse_mass[p]
                 velocity[p, m] += 0.5 * h * acceleration[p, m]
     return multiplier, most_steps, most_extension, worst_edge
+
+
+@numba.njit(cache=True, inline="always")
+def _segment_hits_triangle(position, a, b, i, j, k):
+    """Whether the segment a-b passes through the triangle (i, j, k) (Moller & Trumbore
+    1997); a segment in the triangle's plane counts as missing it."""
+    dx, dy, dz = _corner(position, b, a)
+    e1x, e1y, e1z = _corner(position, j, i)
+    e2x, e2y, e2z = _corner(position, k, i)
+    px, py, pz = _cross(dx, dy, dz, e2x, e2y, e2z)
+    det = e1x * px + e1y * py + e1z * pz
+    scale = (np.sqrt(dx * dx + dy * dy + dz * dz)
+             * np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+             * np.sqrt(e2x * e2x + e2y * e2y + e2z * e2z))
+    if abs(det) <= 1e-12 * scale:
+        return False
+    sx, sy, sz = _corner(position, a, i)
+    u = (sx * px + sy * py + sz * pz) / det
+    if u < 0.0 or u > 1.0:
+        return False
+    qx, qy, qz = _cross(sx, sy, sz, e1x, e1y, e1z)
+    v = (dx * qx + dy * qy + dz * qz) / det
+    if v < 0.0 or u + v > 1.0:
+        return False
+    t = (e2x * qx + e2y * qy + e2z * qz) / det
+    return 0.0 < t < 1.0
+
+
+@numba.njit(cache=True)
+def _cell_range(low, high, origin, cell, shape):
+    """The grid cells [lo, hi] per axis that the box [low, high] overlaps."""
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for m in range(3):
+        lo[m] = min(max(int((low[m] - origin[m]) / cell), 0), shape[m] - 1)
+        hi[m] = min(max(int((high[m] - origin[m]) / cell), 0), shape[m] - 1)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _triangle_box(position, triangles, t):
+    low = np.full(3, np.inf)
+    high = np.full(3, -np.inf)
+    for c in range(3):
+        for m in range(3):
+            x = position[triangles[t, c], m]
+            low[m], high[m] = min(low[m], x), max(high[m], x)
+    return low, high
+
+
+@numba.njit(cache=True)
+def _bin_triangles(position, triangles, origin, cell, shape):
+    """(start, members) of a grid of cells of size ``cell``: the triangles whose bounding
+    box overlaps cell c are members[start[c]:start[c + 1]]."""
+    count = np.zeros(shape[0] * shape[1] * shape[2] + 1, np.int64)
+    for rounds in range(2):
+        if rounds == 1:
+            start = np.cumsum(count)
+            members = np.empty(start[-1], np.int64)
+            fill = start.copy()
+        for t in range(triangles.shape[0]):
+            low, high = _triangle_box(position, triangles, t)
+            lo, hi = _cell_range(low, high, origin, cell, shape)
+            for x in range(lo[0], hi[0] + 1):
+                for y in range(lo[1], hi[1] + 1):
+                    for z in range(lo[2], hi[2] + 1):
+                        c = (x * shape[1] + y) * shape[2] + z
+                        if rounds == 0:
+                            count[c + 1] += 1
+                        else:
+                            members[fill[c]] = t
+                            fill[c] += 1
+    return start, members
+
+
+@numba.njit(cache=True)
+def first_crossing(position, edges, triangles, cell):
+    """(edge, triangle) of the first edge found passing through a triangle it does not
+    touch, or (-1, -1): a closed surface whose edge pierces one of its own triangles has
+    passed through itself. Triangles are binned on a grid of cells of size ``cell`` (at
+    least the longest edge, so a triangle's box spans at most two cells an axis) and each
+    edge is tested against the triangles of the cells its box overlaps."""
+    origin = np.empty(3)
+    shape = np.empty(3, np.int64)
+    for m in range(3):
+        origin[m] = position[:, m].min()
+        shape[m] = int((position[:, m].max() - origin[m]) / cell) + 1
+    start, members = _bin_triangles(position, triangles, origin, cell, shape)
+    low = np.empty(3)
+    high = np.empty(3)
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        for m in range(3):
+            low[m] = min(position[a, m], position[b, m])
+            high[m] = max(position[a, m], position[b, m])
+        lo, hi = _cell_range(low, high, origin, cell, shape)
+        for x in range(lo[0], hi[0] + 1):
+            for y in range(lo[1], hi[1] + 1):
+                for z in range(lo[2], hi[2] + 1):
+                    c = (x * shape[1] + y) * shape[2] + z
+                    for s in range(start[c], start[c + 1]):
+                        t = members[s]
+                        i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+                        if a == i or a == j or a == k or b == i or b == j or b == k:
+                            continue
+                        if _segment_hits_triangle(position, a, b, i, j, k):
+                            return e, t
+    return -1, -1
