@@ -71,6 +71,44 @@ def test_the_linearised_net_has_the_shear_modulus_asked_for():
     assert math.isclose(math.sqrt(3.0) / 4.0 * slope[0], MU, rel_tol=1e-5)
 
 
+def _irregular_patch(n=12, spacing=0.3e-6, seed=2):
+    """A planar triangular lattice patch, its nodes moved by up to a fifth of the spacing:
+    (nodes (N, 3), edges (E, 2), its area)."""
+    j, i = np.divmod(np.arange(n * n), n)
+    nodes = np.column_stack([(i + 0.5 * j) * spacing, j * spacing * math.sqrt(3) / 2,
+                             np.zeros(n * n)])
+    nodes[:, :2] += 0.2 * spacing * np.random.default_rng(seed).uniform(-1, 1, (n * n, 2))
+    corner = (np.arange(n - 1)[None, :] + n * np.arange(n - 1)[:, None]).ravel()
+    triangles = np.concatenate([np.column_stack([corner, corner + 1, corner + n]),
+                                np.column_stack([corner + 1, corner + n + 1, corner + n])])
+    pairs = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                    triangles[:, [2, 0]]]), axis=1)
+    a, b, c = (nodes[triangles[:, k]] for k in range(3))
+    return nodes, np.unique(pairs, axis=0), 0.5 * np.linalg.norm(np.cross(b - a, c - a),
+                                                                  axis=1).sum()
+
+
+def test_an_irregular_net_sheared_a_little_stores_the_energy_of_the_modulus_asked_for():
+    """kBT/p from the net's area and lengths (wlc_parameters): a small uniform shear g of an
+    irregular stress-free net, averaged over the directions 0 and 45 degrees (which average
+    cos^2 over all), stores 2 mu0 g^2 A; the mean length alone would miss it."""
+    nodes, edges, area = _irregular_patch()
+    rest = np.linalg.norm(nodes[edges[:, 0]] - nodes[edges[:, 1]], axis=1)
+    kbt_p, lmax, kp = membrane.wlc_parameters(rest, MU, 2.2, 2.0, area)
+    g = 1e-4
+    stored = []
+    for angle in (0.0, math.pi / 4):
+        c, s = math.cos(2 * angle), math.sin(2 * angle)
+        strain = np.array([[1 + g * c, g * s, 0], [g * s, 1 - g * c, 0], [0, 0, 1]])
+        moved = nodes @ strain.T
+        length = np.linalg.norm(moved[edges[:, 0]] - moved[edges[:, 1]], axis=1)
+        stored.append(np.sum(membrane.wlc_pow_energy(length, lmax, kbt_p, kp, 2.0)
+                             - membrane.wlc_pow_energy(rest, lmax, kbt_p, kp, 2.0)))
+    assert np.mean(stored) / (2 * g ** 2 * area) == pytest.approx(MU, rel=1e-3)
+    mean_only = membrane.wlc_parameters(rest, MU, 2.2, 2.0)[0]
+    assert abs(mean_only / kbt_p - 1) > 0.01
+
+
 @pytest.mark.parametrize("bending", [False, True], ids=["edges", "bending"])
 def test_membrane_forces_are_minus_the_gradient_of_their_energy(bending):
     vertices, triangles = red_blood_cell(frequency=4)

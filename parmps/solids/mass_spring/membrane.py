@@ -7,8 +7,8 @@ bending springs by the spring-network cell model of Fedosov, Caswell & Karniadak
 - every edge a worm-like chain with a repulsive power term (WLC-POW), tension
   kBT/(4p) (1/(1-x)^2 - 1 + 4x) - kp/l^m with x = l/l_max, l_max = l0 * maximum_extension,
   and kp per edge so that it is at rest at its initial length l0 (a stress-free mesh);
-  kBT/p is set from ``shear_modulus`` by the linearised modulus of an equilateral net,
-  mu0 = sqrt(3)/4 dT/dl(l0) (:func:`wlc_parameters`);
+  kBT/p is set from ``shear_modulus`` by the linearised modulus of the net, sqrt(3)/4
+  dT/dl(l0) on an equilateral one, sum_e dT/dl l0^2 / (8 A) on any (:func:`wlc_parameters`);
 - bending U = kb sum (1 - cos(theta - theta0)) over the dihedral angles of the edges,
   theta0 the initial ones, kb = 2 kappa / sqrt(3) from ``bending_modulus`` kappa;
 - the total area (``area_constraint``) and the volume (``volume_constraint``) kept by two
@@ -111,12 +111,23 @@ def wlc_modulus_factor(extension_ratio, exponent):
     return x / (2.0 * (1.0 - x) ** 3) + x + exponent * at_rest
 
 
-def wlc_parameters(rest_length, shear_modulus, maximum_extension, exponent):
+def wlc_parameters(rest_length, shear_modulus, maximum_extension, exponent, area=None):
     """(kBT/p, l_max (E,), kp (E,)) of edges at rest at ``rest_length`` (E,) whose net has
-    the linear shear modulus ``shear_modulus`` at the mean rest length."""
+    the linear shear modulus ``shear_modulus``.
+
+    Edge e is as stiff as k_e = (kBT/p) C / l_e at rest (:func:`linear_stiffness`), and a
+    net of central springs under a small uniform shear, averaged over its orientations,
+    stores the energy of the modulus sum_e k_e l_e^2 / (8 A) (sqrt(3) k/4 on an equilateral
+    net): with the net's ``area`` A, kBT/p gives that modulus, whatever the edges' lengths
+    (one kBT/p makes short edges stiffer: the modulus is the net's mean). Without it, the
+    equilateral net of the mean rest length."""
     x0 = 1.0 / maximum_extension
-    mean = float(np.mean(rest_length))
-    kbt_over_p = 4.0 * shear_modulus * mean / (math.sqrt(3.0) * wlc_modulus_factor(x0, exponent))
+    if area is None:
+        area = len(rest_length) * math.sqrt(3.0) / 6.0 * float(np.mean(rest_length)) ** 2
+        total = len(rest_length) * float(np.mean(rest_length))
+    else:
+        total = float(np.sum(rest_length))
+    kbt_over_p = 8.0 * shear_modulus * area / (total * wlc_modulus_factor(x0, exponent))
     at_rest = 0.25 * kbt_over_p * (1.0 / (1.0 - x0) ** 2 - 1.0 + 4.0 * x0)
     return kbt_over_p, rest_length * maximum_extension, at_rest * rest_length ** exponent
 
@@ -200,7 +211,8 @@ class Membrane:
                                           - position[self.edges[:, 1]], axis=1)
         self.exponent = float(exponent)
         self.kbt_over_p, self.max_length, self.kp = wlc_parameters(
-            self.rest_length, shear_modulus, maximum_extension, self.exponent)
+            self.rest_length, shear_modulus, maximum_extension, self.exponent,
+            triangle_area_total(position, self.triangles))
         self.stiffness = linear_stiffness(self.rest_length, self.kbt_over_p,
                                           1.0 / maximum_extension, self.exponent)
         self.kb = 2.0 * bending_modulus / math.sqrt(3.0)
