@@ -73,7 +73,7 @@ def test_the_linearised_net_has_the_shear_modulus_asked_for():
 
 def _irregular_patch(n=12, spacing=0.3e-6, seed=2):
     """A planar triangular lattice patch, its nodes moved by up to a fifth of the spacing:
-    (nodes (N, 3), edges (E, 2), its area)."""
+    (nodes (N, 3), edges (E, 2), its area, triangles (T, 3))."""
     j, i = np.divmod(np.arange(n * n), n)
     nodes = np.column_stack([(i + 0.5 * j) * spacing, j * spacing * math.sqrt(3) / 2,
                              np.zeros(n * n)])
@@ -84,15 +84,15 @@ def _irregular_patch(n=12, spacing=0.3e-6, seed=2):
     pairs = np.sort(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
                                     triangles[:, [2, 0]]]), axis=1)
     a, b, c = (nodes[triangles[:, k]] for k in range(3))
-    return nodes, np.unique(pairs, axis=0), 0.5 * np.linalg.norm(np.cross(b - a, c - a),
-                                                                  axis=1).sum()
+    area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1).sum()
+    return nodes, np.unique(pairs, axis=0), area, triangles
 
 
 def test_an_irregular_net_sheared_a_little_stores_the_energy_of_the_modulus_asked_for():
     """kBT/p from the net's area and lengths (wlc_parameters): a small uniform shear g of an
     irregular stress-free net, averaged over the directions 0 and 45 degrees (which average
     cos^2 over all), stores 2 mu0 g^2 A; the mean length alone would miss it."""
-    nodes, edges, area = _irregular_patch()
+    nodes, edges, area, _ = _irregular_patch()
     rest = np.linalg.norm(nodes[edges[:, 0]] - nodes[edges[:, 1]], axis=1)
     kbt_p, lmax, kp = membrane.wlc_parameters(rest, MU, 2.2, 2.0, area)
     g = 1e-4
@@ -107,6 +107,54 @@ def test_an_irregular_net_sheared_a_little_stores_the_energy_of_the_modulus_aske
     assert np.mean(stored) / (2 * g ** 2 * area) == pytest.approx(MU, rel=1e-3)
     mean_only = membrane.wlc_parameters(rest, MU, 2.2, 2.0)[0]
     assert abs(mean_only / kbt_p - 1) > 0.01
+
+
+@pytest.mark.parametrize("law, area_modulus", [("skalak", MU * (1 + 2 * 4.0)),
+                                                 ("neo_hookean", 3 * MU)])
+def test_a_triangle_law_sheared_or_dilated_a_little_has_its_moduli(law, area_modulus):
+    """An irregular planar net of triangles: a small pure shear g stores 2 G g^2 A, a small
+    dilation e stores 2 K e^2 A, K = G (1 + 2C) (Skalak, C = 4) or 3 G (neo-Hookean)."""
+    nodes, _, area, triangles = _irregular_patch()
+    inverse = membrane.rest_frames(nodes, triangles)
+    rest = 0.5 * np.linalg.norm(np.cross(nodes[triangles[:, 1]] - nodes[triangles[:, 0]],
+                                         nodes[triangles[:, 2]] - nodes[triangles[:, 0]]),
+                                axis=1)
+    code = membrane.TRIANGLE_LAWS[law]
+
+    def energy(strain):
+        return membrane.triangle_law_energy(nodes @ strain.T, triangles, inverse, rest, code,
+                                            MU, 4.0)
+
+    assert energy(np.eye(3)) == pytest.approx(0.0, abs=1e-30)
+    g = 1e-4
+    for angle in (0.0, 0.3):
+        c, s = math.cos(2 * angle), math.sin(2 * angle)
+        shear = np.array([[1 + g * c, g * s, 0], [g * s, 1 - g * c, 0], [0, 0, 1]])
+        assert energy(shear) / (2 * g ** 2 * area) == pytest.approx(MU, rel=1e-3)
+    dilation = np.diag([1 + g, 1 + g, 1.0])
+    assert energy(dilation) / (2 * g ** 2 * area) == pytest.approx(area_modulus, rel=1e-3)
+
+
+@pytest.mark.parametrize("law", ["skalak", "neo_hookean"])
+def test_triangle_law_forces_are_minus_the_gradient_of_their_energy(law):
+    vertices, triangles = red_blood_cell(frequency=4)
+    m = membrane.Membrane(vertices, triangles, MU, 2.2, 2.0, 0.0, True, True, 0.0, 0.0,
+                          law=law, skalak_c=10.0)
+    position = _perturbed(vertices, 0.15)
+    force = np.zeros_like(position)
+    membrane_kernels.triangle_forces(position, m.triangles, m.rest_inverse, m.rest_area,
+                                     m.law, m.modulus, m.dilation, force)
+    assert membrane.membrane_energy(vertices, m) == pytest.approx(0.0, abs=1e-30)
+    h = 1e-4 * np.linalg.norm(vertices[1] - vertices[0])
+    for node in np.random.default_rng(4).choice(len(position), 12, replace=False):
+        for axis in range(3):
+            up, down = position.copy(), position.copy()
+            up[node, axis] += h
+            down[node, axis] -= h
+            numeric = -(membrane.membrane_energy(up, m)
+                        - membrane.membrane_energy(down, m)) / (2 * h)
+            assert numeric == pytest.approx(force[node, axis], rel=1e-5,
+                                            abs=1e-7 * np.abs(force).max())
 
 
 @pytest.mark.parametrize("bending", [False, True], ids=["edges", "bending"])
@@ -241,9 +289,11 @@ def test_a_sphere_cannot_keep_both_its_area_and_its_volume():
         MassSpringModel.from_case(_case('shape = "sphere"\nradius = 2.0e-6\nrefinement = 4'))
 
 
-def test_a_coarse_cell_pulled_by_16_pn_comes_to_rest_longer_and_narrower():
+@pytest.mark.parametrize("law", ["wlc", "skalak"])
+def test_a_coarse_cell_pulled_by_16_pn_comes_to_rest_longer_and_narrower(law):
     case = _case('shape = "red_blood_cell"\nrefinement = 8\n'
                  + PULL.format(within=1.0e-6, force=1.6e-11), end=4.0e-3)
+    case["body"][0]["membrane"] = law
     model, body, worst = _run(case, 40)
     axial, transverse = np.ptp(body.position[:, 0]), np.ptp(body.position[:, 1])
     assert np.abs(body.velocity).max() < 1e-4        # at rest [m/s]

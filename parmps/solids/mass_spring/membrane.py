@@ -35,51 +35,69 @@ log = logging.getLogger(__name__)
 # 1/(1-x)^2 and a substep chosen at rest cannot follow it much further.
 EXTENSION_LIMIT = 0.95
 
+# The in-plane laws of a cell membrane: "wlc" on the edges, the others on the triangles
+# (membrane_kernels.triangle_forces).
+TRIANGLE_LAWS = {"skalak": kernels.SKALAK, "neo_hookean": kernels.NEO_HOOKEAN}
+CELL_LAWS = ("wlc",) + tuple(TRIANGLE_LAWS)
+
 KEYS = {
-    "membrane": Key("str", "springs", choices=("springs", "wlc"),
+    "membrane": Key("str", "springs", choices=("springs",) + CELL_LAWS,
                     doc="shell: \"springs\": linear edge (stiffness) and bending springs; "
-                        "\"wlc\": worm-like-chain edges, dihedral bending and area and volume "
-                        "kept (docs/shells.md, Cell membranes)"),
+                        "a cell membrane with dihedral bending and its area and volume kept "
+                        "(docs/shells.md, Cell membranes) whose in-plane law is \"wlc\" "
+                        "(worm-like-chain edges), \"skalak\" or \"neo_hookean\" (on "
+                        "the triangles)"),
     "shear_modulus": Key("float", 0.0, ge=0.0,
-                         doc="membrane wlc: linear shear modulus mu0 [N/m] the edges give"),
+                         doc="cell membrane: linear shear modulus G_s [N/m]"),
     "maximum_extension": Key("float", 2.2, gt=1.0,
                              doc="membrane wlc: an edge's maximum length over its rest "
                                  "length, l_max/l0"),
     "power_exponent": Key("float", 2.0, gt=0.0,
                           doc="membrane wlc: m of the repulsive term kp/l^m"),
+    "skalak_c": Key("float", 1.0, gt=0.0,
+                    doc="membrane skalak: C of W = G/4 (I1^2 + 2 I1 - 2 I2 + C I2^2); the "
+                        "area modulus is G (1 + 2C)"),
     "bending_modulus": Key("float", 0.0, ge=0.0,
-                           doc="membrane wlc: bending modulus kappa [J]; dihedral springs "
+                           doc="cell membrane: bending modulus kappa [J]; dihedral springs "
                                "kb = 2 kappa/sqrt(3)"),
-    "area_constraint": Key("bool", True, doc="membrane wlc: keep the total area"),
+    "area_constraint": Key("bool", True, doc="cell membrane: keep the total area"),
     "local_area_modulus": Key("float", 0.0, ge=0.0,
-                              doc="membrane wlc: K_d [N/m] of each triangle's area energy "
+                              doc="cell membrane: K_d [N/m] of each triangle's area energy "
                                   "K_d (A - A0)^2 / (2 A0), which keeps the mesh from "
                                   "crumpling where the total area alone allows it"),
     "drag_rate": Key("float", 0.0, ge=0.0,
-                     doc="membrane wlc: drag -drag_rate m v on every node [1/s]"),
+                     doc="cell membrane: drag -drag_rate m v on every node [1/s]"),
 }
 
 UNSET = {"shear_modulus": 0.0, "maximum_extension": 2.2, "power_exponent": 2.0,
          "bending_modulus": 0.0, "area_constraint": True, "drag_rate": 0.0,
-         "local_area_modulus": 0.0}
+         "local_area_modulus": 0.0, "skalak_c": 1.0}
+# The keys of one in-plane law only.
+LAW_KEYS = {"maximum_extension": ("wlc",), "power_exponent": ("wlc",), "skalak_c": ("skalak",)}
 
 
 def check_keys(label, spec):
     """Refuse membrane keys where they do not apply, in one line naming the key."""
-    wlc = spec.get("membrane", "springs") == "wlc"
-    if spec.get("membrane", "springs") != "springs" and spec["type"] != "shell":
+    law = spec.get("membrane", "springs")
+    if law != "springs" and spec["type"] != "shell":
         raise CaseError(f"{label}.membrane applies to shell bodies only (type = \"shell\")")
     for key, unset in UNSET.items():
-        if not wlc and spec.get(key, unset) != unset:
-            raise CaseError(f"{label}.{key} applies to membrane = \"wlc\" only")
-    if not wlc:
+        if spec.get(key, unset) == unset:
+            continue
+        if law == "springs":
+            raise CaseError(f"{label}.{key} applies to a cell membrane only (membrane = "
+                            f"{' or '.join(repr(c) for c in CELL_LAWS)})")
+        if law not in LAW_KEYS.get(key, CELL_LAWS):
+            raise CaseError(f"{label}.{key} applies to membrane = "
+                            f"\"{LAW_KEYS[key][0]}\" only, not \"{law}\"")
+    if law == "springs":
         return
     for key in ("stiffness", "bending_stiffness"):
         if spec.get(key) not in (None, 0.0):
-            raise CaseError(f"{label}.{key} is a linear spring's; membrane = \"wlc\" takes "
+            raise CaseError(f"{label}.{key} is a linear spring's; membrane = \"{law}\" takes "
                             f"shear_modulus and bending_modulus instead")
     if not spec["shear_modulus"] > 0:
-        raise CaseError(f"{label}.shear_modulus must be > 0 [N/m] with membrane = \"wlc\"")
+        raise CaseError(f"{label}.shear_modulus must be > 0 [N/m] with membrane = \"{law}\"")
 
 
 # --------------------------------------------------------------------------
@@ -175,8 +193,46 @@ def bending_energy(position, quads, rest_angle, kb):
     return float(kb * np.sum(1.0 - np.cos(dihedral_angles(position, quads) - rest_angle)))
 
 
+def rest_frames(position, triangles):
+    """Dm^-1 (T, 2, 2) of every triangle: Dm its edges x1 - x0 and x2 - x0 in an
+    orthonormal frame of its own plane (the first axis along x1 - x0)."""
+    a, b, c = (position[triangles[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    length = np.linalg.norm(e1, axis=1)
+    u = e1 / length[:, None]
+    normal = np.cross(e1, e2)
+    w = np.cross(normal / np.linalg.norm(normal, axis=1)[:, None], u)
+    frame = np.zeros((len(triangles), 2, 2))
+    frame[:, 0, 0] = length
+    frame[:, 0, 1] = np.einsum("ij,ij->i", e2, u)
+    frame[:, 1, 1] = np.einsum("ij,ij->i", e2, w)
+    return np.linalg.inv(frame)
+
+
+def cauchy_green(position, triangles, rest_inverse):
+    """(C11, C12, C22) of every triangle's right Cauchy-Green tensor F^T F."""
+    a, b, c = (position[triangles[:, k]] for k in range(3))
+    d = np.stack([b - a, c - a], axis=2)                       # (T, 3, 2)
+    f = np.einsum("tmb,tba->tma", d, rest_inverse)
+    return (np.einsum("tm,tm->t", f[:, :, 0], f[:, :, 0]),
+            np.einsum("tm,tm->t", f[:, :, 0], f[:, :, 1]),
+            np.einsum("tm,tm->t", f[:, :, 1], f[:, :, 1]))
+
+
+def triangle_law_energy(position, triangles, rest_inverse, rest_area, law, modulus,
+                        dilation):
+    """sum A0 W(C) of membrane_kernels.triangle_forces' laws; arrays."""
+    c11, c12, c22 = cauchy_green(position, triangles, rest_inverse)
+    i1, i2 = c11 + c22 - 2.0, c11 * c22 - c12 ** 2 - 1.0
+    if law == kernels.SKALAK:
+        w = 0.25 * modulus * (i1 ** 2 + 2.0 * i1 - 2.0 * i2 + dilation * i2 ** 2)
+    else:
+        w = 0.5 * modulus * (i1 + 2.0 + 1.0 / (i2 + 1.0) - 3.0)
+    return float(np.sum(rest_area * w))
+
+
 def membrane_energy(position, membrane):
-    """Elastic energy of the membrane: its edges and its dihedrals."""
+    """Elastic energy of the membrane: its edges or triangles and its dihedrals."""
     edges = membrane.edges
     length = np.linalg.norm(position[edges[:, 0]] - position[edges[:, 1]], axis=1)
     chain = wlc_pow_energy(length, membrane.max_length, membrane.kbt_over_p, membrane.kp,
@@ -185,7 +241,12 @@ def membrane_energy(position, membrane):
     area = 0.5 * np.linalg.norm(np.cross(b - a, c - a), axis=1)
     local = 0.5 * membrane.local_modulus * np.sum((area - membrane.rest_area) ** 2
                                                   / membrane.rest_area)
-    return (float(chain.sum()) + float(local)
+    law = 0.0
+    if membrane.law:
+        law = triangle_law_energy(position, membrane.triangles, membrane.rest_inverse,
+                                  membrane.rest_area, membrane.law, membrane.modulus,
+                                  membrane.dilation)
+    return (float(chain.sum()) + float(local) + law
             + bending_energy(position, membrane.quads, membrane.rest_angle, membrane.kb))
 
 
@@ -203,18 +264,25 @@ class Membrane:
 
     def __init__(self, position, triangles, shear_modulus, maximum_extension, exponent,
                  bending_modulus, area_constraint, volume_constraint, drag_rate, damping,
-                 local_area_modulus=0.0):
+                 local_area_modulus=0.0, law="wlc", skalak_c=1.0):
         self.triangles = np.asarray(triangles, dtype=np.int64)
         self.quads = dihedral_quads(self.triangles)
         self.edges = np.ascontiguousarray(self.quads[:, :2])
         self.rest_length = np.linalg.norm(position[self.edges[:, 0]]
                                           - position[self.edges[:, 1]], axis=1)
         self.exponent = float(exponent)
-        self.kbt_over_p, self.max_length, self.kp = wlc_parameters(
-            self.rest_length, shear_modulus, maximum_extension, self.exponent,
-            triangle_area_total(position, self.triangles))
-        self.stiffness = linear_stiffness(self.rest_length, self.kbt_over_p,
-                                          1.0 / maximum_extension, self.exponent)
+        # 0: the edges' WLC-POW law; else the triangles' (membrane_kernels.triangle_forces).
+        self.law = TRIANGLE_LAWS.get(law, 0)
+        self.modulus, self.dilation = float(shear_modulus), float(skalak_c)
+        self.rest_inverse = rest_frames(position, self.triangles)
+        if self.law:
+            self._no_chains(position)
+        else:
+            self.kbt_over_p, self.max_length, self.kp = wlc_parameters(
+                self.rest_length, shear_modulus, maximum_extension, self.exponent,
+                triangle_area_total(position, self.triangles))
+            self.stiffness = linear_stiffness(self.rest_length, self.kbt_over_p,
+                                              1.0 / maximum_extension, self.exponent)
         self.kb = 2.0 * bending_modulus / math.sqrt(3.0)
         self.rest_angle = dihedral_angles(position, self.quads)
         self.rest_cosine, self.rest_sine = np.cos(self.rest_angle), np.sin(self.rest_angle)
@@ -229,6 +297,26 @@ class Membrane:
         self.multiplier = np.zeros(2)
         self.extension = 0.0  # the largest l/l_max of the last advance
         self.worst_edge = 0   # and its edge
+
+    def _no_chains(self, position):
+        """The edges of a triangle law: no tension (their dashpots stay), and a linear
+        stand-in as stiff as the law at rest for the substep: an edge of stiffness
+        (8/3) max(G, K/2) (A1 + A2)/l^2 (A1, A2 its triangles' areas) gives an
+        equilateral net the shear modulus G or the area modulus K."""
+        self.kbt_over_p = 0.0
+        self.kp = np.zeros(len(self.edges))
+        self.max_length = self.rest_length / EXTENSION_LIMIT * 1e6   # never reached
+        area = {kernels.SKALAK: self.modulus * (1.0 + 2.0 * self.dilation),
+                kernels.NEO_HOOKEAN: 3.0 * self.modulus}[self.law]
+        a, b, c, d = (position[self.quads[:, k]] for k in range(4))
+        pair = 0.5 * (np.linalg.norm(np.cross(b - a, c - a), axis=1)
+                      + np.linalg.norm(np.cross(a - b, d - b), axis=1))
+        self.stiffness = (8.0 / 3.0 * max(self.modulus, 0.5 * area) * pair
+                          / self.rest_length ** 2)
+
+    def triangle_law(self):
+        """(law, Dm^-1, G, C) for the kernels (law 0: the edges carry the law)."""
+        return (np.int64(self.law), self.rest_inverse, self.modulus, self.dilation)
 
     def stability_springs(self):
         """(pairs, stiffness) of a linear network as stiff as the membrane at rest: its
@@ -255,7 +343,7 @@ class Membrane:
             body.load_end, body.load_ramp, time, self.edges, self.max_length, self.kp,
             self.kbt_over_p, self.exponent, self.damping, EXTENSION_LIMIT, self.quads,
             self.rest_cosine, self.rest_sine, self.kb, self.triangles, self.rest_area,
-            self.local_modulus, self.drag, force)
+            self.local_modulus, self.drag, self.triangle_law(), force)
         return force
 
     def first_acceleration(self, body, time, h):
@@ -272,12 +360,23 @@ class Membrane:
     def stiffening(self, position):
         """How much stiffer than at rest the stiffest edge is now: the chain stiffens as
         1/(1-x)^3, and a substep chosen at rest would not be stable on it."""
+        if self.law:
+            return self._triangle_stiffening(position)
         edges = self.edges
         length = np.linalg.norm(position[edges[:, 0]] - position[edges[:, 1]], axis=1)
         length = np.minimum(length, EXTENSION_LIMIT * self.max_length)
         now = wlc_pow_stiffness(length, self.max_length, self.kbt_over_p, self.kp,
                                 self.exponent)
         return max(1.0, float(np.max(now / self.stiffness)))
+
+    def _triangle_stiffening(self, position):
+        """A triangle law's tangent grows with the stretch (Skalak's as lambda^2 along
+        it) and, neo-Hookean, as a triangle shrinks (its 1/det C term): the square of
+        the largest of lambda_max^2 and 1/J over the triangles."""
+        c11, c12, c22 = cauchy_green(position, self.triangles, self.rest_inverse)
+        stretch = 0.5 * (c11 + c22 + np.sqrt((c11 - c22) ** 2 + 4.0 * c12 ** 2))
+        shrink = 1.0 / np.sqrt(np.maximum(c11 * c22 - c12 ** 2, 1e-12))
+        return max(1.0, float(max(stretch.max(), shrink.max()))) ** 2
 
     def advance(self, body, time, h, count):
         """Substeps of ``body`` over ``count`` h (body.Body.advance), each shorter by the
@@ -296,7 +395,8 @@ class Membrane:
             held, body.load_field, body.load_start, body.load_end, body.load_ramp, time, h,
             count, self.edges, self.max_length, self.kp, self.kbt_over_p, self.exponent,
             self.damping, EXTENSION_LIMIT, self.quads, self.rest_cosine, self.rest_sine,
-            self.kb, self.rest_area, self.local_modulus, self.drag, self.triangles, self.rest,
+            self.kb, self.rest_area, self.local_modulus, self.drag, self.triangle_law(),
+            self.triangles, self.rest,
             self.active, body.constraint_tolerance, body.constraint_iterations)
         body.multiplier = float(self.multiplier[1])
         return count
@@ -380,7 +480,7 @@ def attach(body, label, spec):
                         spec["maximum_extension"], spec["power_exponent"],
                         spec["bending_modulus"], spec["area_constraint"],
                         spec["volume_constraint"], spec["drag_rate"], spec["damping"],
-                        spec["local_area_modulus"])
+                        spec["local_area_modulus"], spec["membrane"], spec["skalak_c"])
     membrane.set_heights(body.position)
     if membrane.active.all():
         _check_constraints_independent(label, body.position, membrane.triangles)
@@ -392,8 +492,9 @@ def attach(body, label, spec):
     body.rest_length = np.sqrt(np.einsum("ij,ij->i", separation, separation))
     body.membrane = membrane
     mean = float(membrane.rest_length.mean())
-    log.info("%s: membrane wlc, %d nodes, %d edges (mean %.4g m), mu0 %.4g N/m, kBT/p %.4g N, "
-             "kb %.4g J, area %.6g m^2, volume %.6g m^3", label, body.n_nodes,
+    log.info("%s: membrane %s, %d nodes, %d edges (mean %.4g m), mu0 %.4g N/m, kBT/p %.4g N, "
+             "kb %.4g J, area %.6g m^2, volume %.6g m^3", label, spec["membrane"],
+             body.n_nodes,
              len(membrane.edges), mean, spec["shear_modulus"], membrane.kbt_over_p,
              membrane.kb, membrane.rest[0], membrane.rest[1])
     return body

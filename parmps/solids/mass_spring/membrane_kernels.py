@@ -264,11 +264,12 @@ def load_factor(time, start, end, ramp):
 def membrane_force(position, velocity, mass, held, load_field, load_start, load_end,
                    load_ramp, now, edges, max_length, kp, kbt_over_p, exponent, damping,
                    limit, quads, rest_cosine, rest_sine, kb, triangles, rest_area,
-                   local_modulus, drag, force):
+                   local_modulus, drag, triangle_law, force):
     """Every force on the nodes but the constraints', into ``force``: ``held`` (gravity,
     fluid), the windowed loads at ``now``, the edges, the dihedrals, the triangles' local
-    area term and the drag -drag m v. Returns the largest edge extension l/l_max and
-    its edge."""
+    area term, their in-plane law if ``triangle_law`` = (law, Dm^-1, G, C) names one
+    (:func:`triangle_forces`; law 0: none) and the drag -drag m v. Returns the largest
+    edge extension l/l_max and its edge."""
     n = position.shape[0]
     force[:, :] = held
     for load in range(load_field.shape[0]):
@@ -283,6 +284,10 @@ def membrane_force(position, velocity, mass, held, load_field, load_start, load_
         bending_forces(position, quads, rest_cosine, rest_sine, kb, force)
     if local_modulus != 0.0:
         local_area_forces(position, triangles, rest_area, local_modulus, force)
+    law, rest_inverse, modulus, dilation = triangle_law
+    if law != 0:
+        triangle_forces(position, triangles, rest_inverse, rest_area, law, modulus, dilation,
+                        force)
     if drag != 0.0:
         for p in range(n):
             for m in range(3):
@@ -294,8 +299,8 @@ def membrane_force(position, velocity, mass, held, load_field, load_start, load_
 def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held, load_field,
                       load_start, load_end, load_ramp, time, h, count, edges, max_length, kp,
                       kbt_over_p, exponent, damping, limit, quads, rest_cosine, rest_sine, kb,
-                      rest_area, local_modulus, drag, triangles, rest, active, tolerance,
-                      iterations):
+                      rest_area, local_modulus, drag, triangle_law, triangles, rest, active,
+                      tolerance, iterations):
     """``count`` velocity-Verlet substeps of a membrane body (body.Body.advance's scheme).
     Returns (the last multipliers (2,), the most Newton steps, the largest extension and
     its edge). A substep that takes an edge to ``limit`` ends the loop: the caller stops
@@ -317,7 +322,7 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
                                    load_end, load_ramp, time + (step + 1) * h, edges,
                                    max_length, kp, kbt_over_p, exponent, damping, limit,
                                    quads, rest_cosine, rest_sine, kb, triangles, rest_area,
-                                   local_modulus, drag, force)
+                                   local_modulus, drag, triangle_law, force)
         if extension > most_extension:
             most_extension, worst_edge = extension, edge
         if extension >= limit:
@@ -439,3 +444,53 @@ def first_crossing(position, edges, triangles, cell):
                         if _segment_hits_triangle(position, a, b, i, j, k):
                             return e, t
     return -1, -1
+
+
+# The in-plane laws of a triangle (membrane.TRIANGLE_LAWS).
+SKALAK = 1
+NEO_HOOKEAN = 2
+
+
+@numba.njit(cache=True)
+def triangle_forces(position, triangles, rest_inverse, rest_area, law, modulus, dilation,
+                    force):
+    """Forces of the triangles' hyperelastic energy A0 W(C), C = F^T F the right
+    Cauchy-Green tensor of each triangle's (constant) deformation gradient F = [x1 - x0,
+    x2 - x0] Dm^-1 (3x2; ``rest_inverse`` Dm^-1 from the rest triangle in its own plane),
+    added into ``force``. With I1 = tr C - 2 and I2 = det C - 1:
+    Skalak et al. (1973), W = G/4 (I1^2 + 2 I1 - 2 I2 + C I2^2) (``dilation`` C);
+    neo-Hookean (a thin sheet of incompressible material), W = G/2 (tr C + 1/det C - 3).
+    dW/dF = 2 W_I1 F + 2 W_I2 F adj(C); the nodes get -A0 dW/dF Dm^-T (1 and 2) and minus
+    their sum (0). A triangle collapsed to det C <= 0 is skipped (the fold check stops
+    the run on it)."""
+    for t in range(triangles.shape[0]):
+        i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        d1 = _corner(position, j, i)
+        d2 = _corner(position, k, i)
+        f0 = np.empty(3)
+        f1 = np.empty(3)
+        for m in range(3):
+            f0[m] = d1[m] * rest_inverse[t, 0, 0] + d2[m] * rest_inverse[t, 1, 0]
+            f1[m] = d1[m] * rest_inverse[t, 0, 1] + d2[m] * rest_inverse[t, 1, 1]
+        c11 = f0[0] * f0[0] + f0[1] * f0[1] + f0[2] * f0[2]
+        c12 = f0[0] * f1[0] + f0[1] * f1[1] + f0[2] * f1[2]
+        c22 = f1[0] * f1[0] + f1[1] * f1[1] + f1[2] * f1[2]
+        det = c11 * c22 - c12 * c12
+        if det <= 0.0:
+            continue
+        if law == SKALAK:
+            w1 = 0.5 * modulus * (c11 + c22 - 1.0)
+            w2 = 0.5 * modulus * (dilation * (det - 1.0) - 1.0)
+        else:
+            w1 = 0.5 * modulus
+            w2 = -0.5 * modulus / (det * det)
+        a = -rest_area[t]
+        for m in range(3):
+            # dW/dF's two columns, then -A0 dW/dF Dm^-T.
+            p0 = 2.0 * w1 * f0[m] + 2.0 * w2 * (f0[m] * c22 - f1[m] * c12)
+            p1 = 2.0 * w1 * f1[m] + 2.0 * w2 * (f1[m] * c11 - f0[m] * c12)
+            h1 = a * (p0 * rest_inverse[t, 0, 0] + p1 * rest_inverse[t, 0, 1])
+            h2 = a * (p0 * rest_inverse[t, 1, 0] + p1 * rest_inverse[t, 1, 1])
+            force[j, m] += h1
+            force[k, m] += h2
+            force[i, m] -= h1 + h2
