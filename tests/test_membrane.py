@@ -218,7 +218,14 @@ def test_the_local_area_force_is_minus_the_gradient_of_its_energy():
                                             abs=1e-7 * np.abs(force).max())
 
 
-def _case(body, end=2.0e-3, dt=1.0e-4):
+CELL = """membrane = "wlc"
+shear_modulus = 6.3e-6
+bending_modulus = 2.4e-19
+local_area_modulus = 6.3e-6
+drag_rate = 2.0e4"""
+
+
+def _case(body, end=2.0e-3, dt=1.0e-4, cell=CELL):
     from parmps import config, schema
     text = f"""title = "membrane test"
 [domain]
@@ -234,11 +241,7 @@ output_interval = {dt}
 name = "cell"
 type = "shell"
 node_mass = 1.0e-17
-membrane = "wlc"
-shear_modulus = 6.3e-6
-bending_modulus = 2.4e-19
-local_area_modulus = 6.3e-6
-drag_rate = 2.0e4
+{cell}
 {body}
 """
     return schema.validate(config.load_text(text, "membrane test"))
@@ -356,3 +359,18 @@ def test_a_membrane_pressed_through_itself_stops_the_run_though_no_triangle_fold
                                          r"the edge at node \d+ crosses the triangle at node "
                                          r"\d+: raise bending_modulus.*solid.safety"):
         m.check("cell", pressed)
+
+
+@pytest.mark.parametrize("law, key, message", [
+    ("wlc", "skalak_c = 5.0", r"'cell'\.skalak_c applies to membrane = \"skalak\" only"),
+    ("skalak", "maximum_extension = 1.5",
+     r"'cell'\.maximum_extension applies to membrane = \"wlc\" only, not \"skalak\""),
+    ("springs", "", r"'cell'\.drag_rate applies to a cell membrane only"),
+])
+def test_a_membrane_key_of_another_law_is_refused_naming_it(law, key, message):
+    from parmps.errors import CaseError
+    cell = CELL.replace('"wlc"', f'"{law}"')
+    if law == "springs":
+        cell = "stiffness = 1.0e-6\ndrag_rate = 1.0"
+    with pytest.raises(CaseError, match=message):
+        _case(f'shape = "red_blood_cell"\nrefinement = 4\n{key}\n', cell=cell)
