@@ -374,3 +374,35 @@ def test_a_membrane_key_of_another_law_is_refused_naming_it(law, key, message):
         cell = "stiffness = 1.0e-6\ndrag_rate = 1.0"
     with pytest.raises(CaseError, match=message):
         _case(f'shape = "red_blood_cell"\nrefinement = 4\n{key}\n', cell=cell)
+
+
+def _verlet_growth(m, vertices, mass, h, steps, seed=5):
+    """How much a tiny random displacement of ``m``'s rest shape grows over ``steps``
+    substeps of h of the run's own compiled scheme (no drag, loads or constraints)."""
+    n = len(vertices)
+    rng = np.random.default_rng(seed)
+    start = 1e-6 * float(m.rest_length.mean()) * rng.standard_normal((n, 3))
+    position, velocity = vertices + start, np.zeros((n, 3))
+    acceleration = m.elastic_force(position) / mass[:, None]
+    none = np.zeros(0)
+    membrane_kernels.membrane_substeps(
+        position, velocity, acceleration, mass, 1.0 / mass, np.zeros((n, 3)),
+        np.zeros((0, n, 3)), none, none, none, 0.0, h, steps, m.edges, m.max_length, m.kp,
+        m.kbt_over_p, m.exponent, 0.0, membrane.EXTENSION_LIMIT, m.quads, m.rest_cosine,
+        m.rest_sine, m.kb, m.rest_area, m.local_modulus, 0.0, m.triangle_law(), m.triangles,
+        m.rest, np.array([False, False]), 1e-12, 0)
+    return np.abs(position - vertices).max() / np.abs(start).max()
+
+
+@pytest.mark.parametrize("law", ["wlc", "neo_hookean"])
+def test_the_substep_limit_is_the_membranes_own_verlet_limit(law):
+    """The limit 2/omega from Membrane.highest_frequency is where the run's scheme turns
+    unstable: 3 % below it a small disturbance stays small, 3 % above it it explodes (a
+    stand-in of springs is 1.2 times too stiff for the chains, 0.9 for the sheet)."""
+    vertices, triangles = red_blood_cell(frequency=6, base="icosahedron")
+    m = membrane.Membrane(vertices, triangles, MU, 2.2, 2.0, KAPPA, False, False, 0.0, 0.0,
+                          local_area_modulus=MU if law == "wlc" else 0.0, law=law)
+    mass = np.full(len(vertices), 1e-17)
+    limit = 2.0 / m.highest_frequency(vertices, mass)
+    assert _verlet_growth(m, vertices, mass, 0.97 * limit, 3000) < 10.0
+    assert _verlet_growth(m, vertices, mass, 1.03 * limit, 3000) > 1e3
