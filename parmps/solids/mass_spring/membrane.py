@@ -9,12 +9,17 @@ bending springs by the spring-network cell model of Fedosov, Caswell & Karniadak
   and kp per edge so that it is at rest at its initial length l0 (a stress-free mesh);
   kBT/p is set from ``shear_modulus`` by the linearised modulus of the net, sqrt(3)/4
   dT/dl(l0) on an equilateral one, sum_e dT/dl l0^2 / (8 A) on any (:func:`wlc_parameters`);
+  or, with ``membrane = "skalak"`` or ``"neo_hookean"``, a hyperelastic energy A0 W(C) on
+  every triangle instead (membrane_kernels.triangle_forces);
 - bending U = kb sum (1 - cos(theta - theta0)) over the dihedral angles of the edges,
   theta0 the initial ones, kb = 2 kappa / sqrt(3) from ``bending_modulus`` kappa;
 - the total area (``area_constraint``) and the volume (``volume_constraint``) kept by two
   Lagrange multipliers, a 2x2 system per substep (membrane_kernels.constrain);
 - a drag -drag_rate m v on every node: the damping that brings a load to rest without
-  changing where it rests.
+  changing where it rests;
+- the substep from the membrane's own highest frequency (:meth:`Membrane.highest_frequency`),
+  and a run stopped, naming the body, a node and the setting, when a chain nears its
+  maximum length, two triangles fold over or the surface passes through itself.
 
 Arrays in, arrays out; the loops over edges, dihedrals and triangles are compiled
 (:mod:`parmps.solids.mass_spring.membrane_kernels`).
