@@ -367,7 +367,9 @@ class Body:
         """
         _, rate = stiffest_frequency(self.mass, self.springs, self.stiffness, self.damping)
         if self.membrane is not None:
+            # A cell membrane's own stiffness, not its springs' stand-in.
             rate += self.membrane.drag
+            return verlet_limit(self.membrane.highest_frequency(self.position, self.mass), rate)
         omega = highest_frequency(stiffness_matrix(self.position, self.springs, self.stiffness),
                                   self.mass)
         return verlet_limit(omega, rate)

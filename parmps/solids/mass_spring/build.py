@@ -384,9 +384,9 @@ def build_body(k, spec, gravity, domain=None):
     if spec["type"] != "shell":
         check_shell_keys(label, spec)
     check_membrane_keys(label, spec)
-    wlc = spec.get("membrane") == "wlc"
+    cell = spec.get("membrane", "springs") != "springs"   # a cell membrane, any law
     # A membrane replaces the shell's springs (membrane.attach): build it with placeholders.
-    shell_spec = dict(spec, stiffness=1.0, bending_stiffness=0.0) if wlc else spec
+    shell_spec = dict(spec, stiffness=1.0, bending_stiffness=0.0) if cell else spec
     position, springs, stiffness, mass, boundary, shape = builder(label, shell_spec, dimension)
     damping, axial_damping = spec["damping"], False
     if shape is not None and is_elastic(spec):
@@ -411,7 +411,7 @@ def build_body(k, spec, gravity, domain=None):
                 encloses_fluid=spec["type"] == "shell")
     if body.rest_volume <= 0.0:
         raise CaseError(f"{label}: its boundary encloses no volume ({body.rest_volume:.6g})")
-    if wlc:
+    if cell:
         attach_membrane(body, label, spec)
     log.debug("body %s: %d nodes, %d springs, volume %.6g, %d pinned, %d loads", name, n,
               len(springs), body.rest_volume, int(pinned.sum()), len(loads))

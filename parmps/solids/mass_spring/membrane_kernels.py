@@ -264,11 +264,12 @@ def load_factor(time, start, end, ramp):
 def membrane_force(position, velocity, mass, held, load_field, load_start, load_end,
                    load_ramp, now, edges, max_length, kp, kbt_over_p, exponent, damping,
                    limit, quads, rest_cosine, rest_sine, kb, triangles, rest_area,
-                   local_modulus, drag, force):
+                   local_modulus, drag, triangle_law, force):
     """Every force on the nodes but the constraints', into ``force``: ``held`` (gravity,
     fluid), the windowed loads at ``now``, the edges, the dihedrals, the triangles' local
-    area term and the drag -drag m v. Returns the largest edge extension l/l_max and
-    its edge."""
+    area term, their in-plane law if ``triangle_law`` = (law, Dm^-1, G, C) names one
+    (:func:`triangle_forces`; law 0: none) and the drag -drag m v. Returns the largest
+    edge extension l/l_max and its edge."""
     n = position.shape[0]
     force[:, :] = held
     for load in range(load_field.shape[0]):
@@ -283,6 +284,10 @@ def membrane_force(position, velocity, mass, held, load_field, load_start, load_
         bending_forces(position, quads, rest_cosine, rest_sine, kb, force)
     if local_modulus != 0.0:
         local_area_forces(position, triangles, rest_area, local_modulus, force)
+    law, rest_inverse, modulus, dilation = triangle_law
+    if law != 0:
+        triangle_forces(position, triangles, rest_inverse, rest_area, law, modulus, dilation,
+                        force)
     if drag != 0.0:
         for p in range(n):
             for m in range(3):
@@ -294,8 +299,8 @@ def membrane_force(position, velocity, mass, held, load_field, load_start, load_
 def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held, load_field,
                       load_start, load_end, load_ramp, time, h, count, edges, max_length, kp,
                       kbt_over_p, exponent, damping, limit, quads, rest_cosine, rest_sine, kb,
-                      rest_area, local_modulus, drag, triangles, rest, active, tolerance,
-                      iterations):
+                      rest_area, local_modulus, drag, triangle_law, triangles, rest, active,
+                      tolerance, iterations):
     """``count`` velocity-Verlet substeps of a membrane body (body.Body.advance's scheme).
     Returns (the last multipliers (2,), the most Newton steps, the largest extension and
     its edge). A substep that takes an edge to ``limit`` ends the loop: the caller stops
@@ -317,7 +322,7 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
                                    load_end, load_ramp, time + (step + 1) * h, edges,
                                    max_length, kp, kbt_over_p, exponent, damping, limit,
                                    quads, rest_cosine, rest_sine, kb, triangles, rest_area,
-                                   local_modulus, drag, force)
+                                   local_modulus, drag, triangle_law, force)
         if extension > most_extension:
             most_extension, worst_edge = extension, edge
         if extension >= limit:
@@ -331,3 +336,161 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
                 acceleration[p, m] = force[p, m] * inverse_mass[p]
                 velocity[p, m] += 0.5 * h * acceleration[p, m]
     return multiplier, most_steps, most_extension, worst_edge
+
+
+@numba.njit(cache=True, inline="always")
+def _segment_hits_triangle(position, a, b, i, j, k):
+    """Whether the segment a-b passes through the triangle (i, j, k) (Moller & Trumbore
+    1997); a segment in the triangle's plane counts as missing it."""
+    dx, dy, dz = _corner(position, b, a)
+    e1x, e1y, e1z = _corner(position, j, i)
+    e2x, e2y, e2z = _corner(position, k, i)
+    px, py, pz = _cross(dx, dy, dz, e2x, e2y, e2z)
+    det = e1x * px + e1y * py + e1z * pz
+    scale = (np.sqrt(dx * dx + dy * dy + dz * dz)
+             * np.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+             * np.sqrt(e2x * e2x + e2y * e2y + e2z * e2z))
+    if abs(det) <= 1e-12 * scale:
+        return False
+    sx, sy, sz = _corner(position, a, i)
+    u = (sx * px + sy * py + sz * pz) / det
+    if u < 0.0 or u > 1.0:
+        return False
+    qx, qy, qz = _cross(sx, sy, sz, e1x, e1y, e1z)
+    v = (dx * qx + dy * qy + dz * qz) / det
+    if v < 0.0 or u + v > 1.0:
+        return False
+    t = (e2x * qx + e2y * qy + e2z * qz) / det
+    return 0.0 < t < 1.0
+
+
+@numba.njit(cache=True)
+def _cell_range(low, high, origin, cell, shape):
+    """The grid cells [lo, hi] per axis that the box [low, high] overlaps."""
+    lo = np.empty(3, np.int64)
+    hi = np.empty(3, np.int64)
+    for m in range(3):
+        lo[m] = min(max(int((low[m] - origin[m]) / cell), 0), shape[m] - 1)
+        hi[m] = min(max(int((high[m] - origin[m]) / cell), 0), shape[m] - 1)
+    return lo, hi
+
+
+@numba.njit(cache=True)
+def _triangle_box(position, triangles, t):
+    low = np.full(3, np.inf)
+    high = np.full(3, -np.inf)
+    for c in range(3):
+        for m in range(3):
+            x = position[triangles[t, c], m]
+            low[m], high[m] = min(low[m], x), max(high[m], x)
+    return low, high
+
+
+@numba.njit(cache=True)
+def _bin_triangles(position, triangles, origin, cell, shape):
+    """(start, members) of a grid of cells of size ``cell``: the triangles whose bounding
+    box overlaps cell c are members[start[c]:start[c + 1]]."""
+    count = np.zeros(shape[0] * shape[1] * shape[2] + 1, np.int64)
+    for rounds in range(2):
+        if rounds == 1:
+            start = np.cumsum(count)
+            members = np.empty(start[-1], np.int64)
+            fill = start.copy()
+        for t in range(triangles.shape[0]):
+            low, high = _triangle_box(position, triangles, t)
+            lo, hi = _cell_range(low, high, origin, cell, shape)
+            for x in range(lo[0], hi[0] + 1):
+                for y in range(lo[1], hi[1] + 1):
+                    for z in range(lo[2], hi[2] + 1):
+                        c = (x * shape[1] + y) * shape[2] + z
+                        if rounds == 0:
+                            count[c + 1] += 1
+                        else:
+                            members[fill[c]] = t
+                            fill[c] += 1
+    return start, members
+
+
+@numba.njit(cache=True)
+def first_crossing(position, edges, triangles, cell):
+    """(edge, triangle) of the first edge found passing through a triangle it does not
+    touch, or (-1, -1): a closed surface whose edge pierces one of its own triangles has
+    passed through itself. Triangles are binned on a grid of cells of size ``cell`` (at
+    least the longest edge, so a triangle's box spans at most two cells an axis) and each
+    edge is tested against the triangles of the cells its box overlaps."""
+    origin = np.empty(3)
+    shape = np.empty(3, np.int64)
+    for m in range(3):
+        origin[m] = position[:, m].min()
+        shape[m] = int((position[:, m].max() - origin[m]) / cell) + 1
+    start, members = _bin_triangles(position, triangles, origin, cell, shape)
+    low = np.empty(3)
+    high = np.empty(3)
+    for e in range(edges.shape[0]):
+        a, b = edges[e, 0], edges[e, 1]
+        for m in range(3):
+            low[m] = min(position[a, m], position[b, m])
+            high[m] = max(position[a, m], position[b, m])
+        lo, hi = _cell_range(low, high, origin, cell, shape)
+        for x in range(lo[0], hi[0] + 1):
+            for y in range(lo[1], hi[1] + 1):
+                for z in range(lo[2], hi[2] + 1):
+                    c = (x * shape[1] + y) * shape[2] + z
+                    for s in range(start[c], start[c + 1]):
+                        t = members[s]
+                        i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+                        if a == i or a == j or a == k or b == i or b == j or b == k:
+                            continue
+                        if _segment_hits_triangle(position, a, b, i, j, k):
+                            return e, t
+    return -1, -1
+
+
+# The in-plane laws of a triangle (membrane.TRIANGLE_LAWS).
+SKALAK = 1
+NEO_HOOKEAN = 2
+
+
+@numba.njit(cache=True)
+def triangle_forces(position, triangles, rest_inverse, rest_area, law, modulus, dilation,
+                    force):
+    """Forces of the triangles' hyperelastic energy A0 W(C), C = F^T F the right
+    Cauchy-Green tensor of each triangle's (constant) deformation gradient F = [x1 - x0,
+    x2 - x0] Dm^-1 (3x2; ``rest_inverse`` Dm^-1 from the rest triangle in its own plane),
+    added into ``force``. With I1 = tr C - 2 and I2 = det C - 1:
+    Skalak et al. (1973), W = G/4 (I1^2 + 2 I1 - 2 I2 + C I2^2) (``dilation`` C);
+    neo-Hookean (a thin sheet of incompressible material), W = G/2 (tr C + 1/det C - 3).
+    dW/dF = 2 W_I1 F + 2 W_I2 F adj(C); the nodes get -A0 dW/dF Dm^-T (1 and 2) and minus
+    their sum (0). A triangle collapsed to det C <= 0 is skipped (the fold check stops
+    the run on it)."""
+    for t in range(triangles.shape[0]):
+        i, j, k = triangles[t, 0], triangles[t, 1], triangles[t, 2]
+        d1 = _corner(position, j, i)
+        d2 = _corner(position, k, i)
+        f0 = np.empty(3)
+        f1 = np.empty(3)
+        for m in range(3):
+            f0[m] = d1[m] * rest_inverse[t, 0, 0] + d2[m] * rest_inverse[t, 1, 0]
+            f1[m] = d1[m] * rest_inverse[t, 0, 1] + d2[m] * rest_inverse[t, 1, 1]
+        c11 = f0[0] * f0[0] + f0[1] * f0[1] + f0[2] * f0[2]
+        c12 = f0[0] * f1[0] + f0[1] * f1[1] + f0[2] * f1[2]
+        c22 = f1[0] * f1[0] + f1[1] * f1[1] + f1[2] * f1[2]
+        det = c11 * c22 - c12 * c12
+        if det <= 0.0:
+            continue
+        if law == SKALAK:
+            w1 = 0.5 * modulus * (c11 + c22 - 1.0)
+            w2 = 0.5 * modulus * (dilation * (det - 1.0) - 1.0)
+        else:
+            w1 = 0.5 * modulus
+            w2 = -0.5 * modulus / (det * det)
+        a = -rest_area[t]
+        for m in range(3):
+            # dW/dF's two columns, then -A0 dW/dF Dm^-T.
+            p0 = 2.0 * w1 * f0[m] + 2.0 * w2 * (f0[m] * c22 - f1[m] * c12)
+            p1 = 2.0 * w1 * f1[m] + 2.0 * w2 * (f1[m] * c11 - f0[m] * c12)
+            h1 = a * (p0 * rest_inverse[t, 0, 0] + p1 * rest_inverse[t, 0, 1])
+            h2 = a * (p0 * rest_inverse[t, 1, 0] + p1 * rest_inverse[t, 1, 1])
+            force[j, m] += h1
+            force[k, m] += h2
+            force[i, m] -= h1 + h2
