@@ -104,6 +104,44 @@ def test_open_and_flipped_meshes_are_refused():
         mesh.check_closed_surface("box", vertices, triangles[:, ::-1])
 
 
+def test_an_open_surface_is_signed_by_its_pseudo_normals_and_ends_at_its_rim():
+    # open_box.stl: box.stl less its top, facing in. Inside is the side it faces (> 0),
+    # behind a face, an edge or a corner < 0 (behind an edge or a corner as deep as from
+    # the farthest of its faces' planes, a tank's layers), and a point nearest to the rim
+    # has no side.
+    vertices, triangles = mesh.read_mesh(MESHES / "open_box.stl")
+    assert mesh.check_wall_surface("open box", vertices, triangles)
+    surface = MeshSurface(vertices, triangles, open=True)
+    points = np.array([[0.1, 0.05, 0.005], [0.1, 0.05, -0.005], [-0.003, 0.05, 0.05],
+                       [-0.003, -0.004, 0.05], [-0.003, -0.004, -0.001], [0.1, 0.05, 0.12],
+                       [-0.003, 0.05, 0.101], [0.1, 0.05, 0.099]])
+    expected = [0.005, -0.005, -0.003, -0.004, -0.004, np.inf, np.inf, 0.05]
+    assert surface.open_signed_distance(points) == pytest.approx(expected, rel=1e-12)
+    lattice = LatticeBlock.covering([0.0, 0.0, 0.0], L0, [-0.05] * 3, [0.25, 0.15, 0.15])
+    on_lattice = surface.lattice_distance(lattice, 0.03)
+    band = np.isfinite(on_lattice)
+    assert np.allclose(on_lattice.T[band.T],
+                       surface.open_signed_distance(lattice.points(band)), atol=1e-15)
+    assert mesh.check_wall_surface("box", *mesh.read_mesh(MESHES / "box.stl")) is False
+
+
+def test_an_open_surfaces_mistakes_are_refused():
+    vertices, triangles = mesh.read_mesh(MESHES / "open_box.stl")
+    flipped = triangles.copy()
+    flipped[0] = flipped[0, ::-1]
+    with pytest.raises(CaseError, match="inconsistent orientation: 3 edges"):
+        mesh.check_wall_surface("open box", vertices, flipped)
+    with pytest.raises(CaseError, match=r"wall\[0\]\.fluid does not apply to an open surface"):
+        build(DOMAIN_3D + f'[[wall]]\nmesh = "{MESHES / "open_box.stl"}"\nfluid = "inside"\n')
+    with pytest.raises(CaseError, match=r"missing key 'wall\[0\]\.fluid': which side of the "
+                                        r"closed surface"):
+        build(DOMAIN_3D + f'[[wall]]\nmesh = "{MESHES / "box.stl"}"\n')
+    # A fluid of a shape needs a closed one.
+    with pytest.raises(CaseError, match="not closed: 4 open edges"):
+        build(DOMAIN_3D.replace("upper = [0.2, 0.1, 0.05]\n", f'upper = [0.2, 0.1, 0.05]\n'
+                                f'mesh = "{MESHES / "open_box.stl"}"\n'))
+
+
 # --------------------------------------------------------------------------
 # Walls from meshes and shapes
 
@@ -131,26 +169,35 @@ def _keys(position, spacing=L0):
     return {tuple(k) for k in np.round(position / spacing * 2).astype(np.int64)}
 
 
-def test_a_meshed_box_lays_a_tanks_particles_less_its_far_corners():
+def _same_particles(one, other):
+    """The same points, each of the same kind, in any order."""
+    def ordered(particles):
+        key = np.round(particles.position / L0 * 2).astype(np.int64)
+        order = np.lexsort(key.T[::-1])
+        return key[order], particles.kind[order]
+    (key, kind), (other_key, other_kind) = ordered(one), ordered(other)
+    return np.array_equal(key, other_key) and np.array_equal(kind, other_kind)
+
+
+def test_a_meshed_box_lays_a_tanks_particles():
+    # A mesh's layers go by distance, squared at its edges and corners (the farthest of
+    # their faces' planes), so a box on the lattice's lines lays a tank's every particle.
     _, tank, _, _ = build(DOMAIN_3D + TANK)
     _, meshed, origin, sources = build(
         DOMAIN_3D + f'[[wall]]\nname = "box"\nmesh = "{MESHES / "box.stl"}"\nfluid = "inside"\n')
     assert sources == ["fluid_block[0]", "wall[0]"]
-    assert np.array_equal(meshed.position[meshed.kind == FLUID],
-                          tank.position[tank.kind == FLUID])
-    walls = (tank.kind == WALL) | (tank.kind == DUMMY)
+    assert _same_particles(meshed, tank)
     mine = (meshed.kind == WALL) | (meshed.kind == DUMMY)
-    # Every point of the meshed box is a point of the tank ...
-    assert _keys(meshed.position[mine]) <= _keys(tank.position[walls])
-    assert _keys(meshed.position[meshed.kind == WALL]) <= _keys(tank.position[tank.kind == WALL])
-    # ... and the tank's others are its edges' and corners' farther than the layers'
-    # depth from the surface (a mesh's layers go by distance, a tank's by layer): fewer
-    # than one layer's worth of particles, its area over l0^2.
-    one_layer = 2 * (20 * 10 + 20 * 10 + 10 * 10)
-    assert 0 < walls.sum() - mine.sum() < one_layer
-    assert 0 <= (tank.kind == WALL).sum() - (meshed.kind == WALL).sum() < one_layer
     depth = Box([0.0, 0.0, 0.0], [0.2, 0.1, 0.1]).signed_distance(meshed.position[mine])
-    assert depth.min() > 0 and depth.max() <= 4 * L0 * (1 + 1e-9)
+    assert depth.min() > 0 and depth.max() <= 4 * math.sqrt(3) * L0 * (1 + 1e-9)
+
+
+def test_an_open_box_mesh_lays_an_open_tanks_particles():
+    # The tank without a roof as an open surface: its walls stop where its faces do.
+    _, tank, _, _ = build(DOMAIN_3D + TANK.replace("open_top = false\n", ""))
+    _, meshed, _, _ = build(DOMAIN_3D + f'[[wall]]\nname = "tank"\n'
+                                        f'mesh = "{MESHES / "open_box.stl"}"\n')
+    assert _same_particles(meshed, tank)
 
 
 @pytest.mark.parametrize("given", ["mesh", "shape"])

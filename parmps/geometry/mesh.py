@@ -146,10 +146,13 @@ def _at(vertices, v):
     return f"({x:.6g}, {y:.6g}, {z:.6g})"
 
 
-def _check_cells(source, vertices, triangles):
-    """Indices in range, no unused vertex, no triangle without area."""
+def _check_cells(source, vertices, triangles, closed=True):
+    """Indices in range, no unused vertex, no triangle without area (``closed``: and
+    enough triangles to close a surface)."""
     n = len(vertices)
-    if len(triangles) < 4:
+    if not len(triangles):
+        raise CaseError(f"{source}: the mesh has no triangles")
+    if closed and len(triangles) < 4:
         raise CaseError(f"{source}: {len(triangles)} triangles cannot close a surface "
                         f"(at least 4)")
     bad = (triangles < 0) | (triangles >= n)
@@ -173,8 +176,10 @@ def _check_cells(source, vertices, triangles):
                         f"{_at(vertices, triangles[t, 0])}")
 
 
-def _check_edges(source, vertices, triangles):
-    """Every edge on exactly two triangles, which run along it in opposite directions."""
+def _check_edges(source, vertices, triangles, allow_open=False):
+    """Every edge on exactly two triangles (``allow_open``: or on one, an edge of the
+    surface's rim), which run along it in opposite directions. Returns the open edges'
+    count."""
     start, end, _ = _half_edges(triangles)
     order, first, counts = _edge_groups(start, end)
     a, b = start[order[first]], end[order[first]]
@@ -185,20 +190,23 @@ def _check_edges(source, vertices, triangles):
         return f"e.g. the edge between vertices {i} and {j} at {_at(vertices, i)}"
 
     open_edges = counts == 1
-    if open_edges.any():
+    if open_edges.any() and not allow_open:
         raise CaseError(f"{source}: the surface is not closed: {int(open_edges.sum())} open "
                         f"edges (on one triangle only), {example(open_edges)}")
     shared = counts > 2
     if shared.any():
         raise CaseError(f"{source}: {int(shared.sum())} non-manifold edges (on more than two "
                         f"triangles), {example(shared)}")
-    # With two triangles on every edge, one that both run along in the same
-    # direction has the same start as its partner.
-    same = start[order[first]] == start[order[first + 1]]
+    # An edge that both its triangles run along in the same direction has the same
+    # start as its partner.
+    paired = first[counts == 2]
+    same = np.zeros(len(first), bool)
+    same[counts == 2] = start[order[paired]] == start[order[paired + 1]]
     if same.any():
         raise CaseError(f"{source}: inconsistent orientation: {int(same.sum())} edges run the "
                         f"same way in both their triangles, {example(same)}; orient every "
                         f"triangle outward")
+    return int(open_edges.sum())
 
 
 def check_closed_surface(source, vertices, triangles, single=True):
@@ -239,6 +247,20 @@ def check_closed_surface(source, vertices, triangles, single=True):
 
 # --------------------------------------------------------------------------
 # Files
+
+
+def check_wall_surface(source, vertices, triangles):
+    """Refuse, in one line starting with ``source``, a wall's mesh that is not a manifold,
+    consistently oriented surface; a closed one must also face outward (as
+    :func:`check_closed_surface`). Returns whether the surface is open (has a rim): an
+    open wall's fluid lies on the side its triangles face."""
+    vertices = np.asarray(vertices, dtype=float)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    _check_cells(source, vertices, triangles, closed=False)
+    if _check_edges(source, vertices, triangles, allow_open=True) == 0:
+        check_closed_surface(source, vertices, triangles, single=False)
+        return False
+    return True
 
 
 def merge_vertices(vertices, triangles, tolerance):

@@ -95,7 +95,7 @@ def build_walls(case, spacing):
     for k, spec in enumerate(case.get("wall", ())):
         name = f"wall[{k}]"
         label = f"{name} '{spec['name']}'" if spec["name"] else name
-        surface = surface_of(label, spec, domain)
+        surface = surface_of(label, spec, domain, wall=True)
         position, kind, velocity, side = wall_particles(label, spec, surface,
                                                         case["particles"]["origin"], spacing,
                                                         domain)

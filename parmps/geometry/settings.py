@@ -41,10 +41,12 @@ SECTIONS = {
         **SURFACE_KEYS,
         "lower": Key("vector", None, doc="shape box: its lower corner [m]"),
         "upper": Key("vector", None, doc="shape box: its upper corner [m]"),
-        "fluid": Key("str", choices=("inside", "outside"),
-                     doc="which side of the closed surface the fluid is on: \"outside\" an "
+        "fluid": Key("str", "", choices=("", "inside", "outside"),
+                     doc="which side of a closed surface the fluid is on: \"outside\" an "
                          "obstacle, \"inside\" a vessel; the wall and dummy layers lie on "
-                         "the other side"),
+                         "the other side. Needed for a shape and a closed mesh; an open "
+                         "mesh (one with a rim) has its fluid on the side its triangles "
+                         "face, and its walls end at the rim"),
         "wall_layers": Key("int", 2, ge=1, le=10, doc="layers of wall particles (in the "
                                                       "PPE), nearest the surface"),
         "dummy_layers": Key("int", 2, ge=0, le=10,
@@ -81,6 +83,9 @@ def check(case):
     for k, wall in enumerate(case["wall"]):
         label = f"wall[{k}]"
         check_shape_keys(label, wall, dimension)
+        if wall["shape"] and not wall["fluid"]:
+            raise CaseError(f"missing key '{label}.fluid': which side of the shape the fluid "
+                            f"is on, \"inside\" (a vessel) or \"outside\" (an obstacle)")
         if wall["shape"] == "box":
             check_ordered_box(label, wall)
         if wall["name"]:

@@ -31,6 +31,8 @@ path's 0.4-0.6 s (a tank and a box block of the same particles; ``--check`` of t
 3.0-3.4 s against 4.2 s on one rank). So no new dependency.
 """
 
+import math
+
 import numba
 import numpy as np
 
@@ -209,35 +211,135 @@ class Box:
 
 
 class MeshSurface:
-    """A closed, outward oriented triangle mesh (vertices (n, 3), triangles (m, 3)),
-    checked by :func:`parmps.geometry.mesh.check_closed_surface` before it gets here."""
+    """A triangle mesh (vertices (n, 3), triangles (m, 3)) checked by
+    :func:`parmps.geometry.mesh.check_wall_surface`: closed and outward oriented, or
+    ``open`` (with a rim), its fluid on the side its triangles face.
 
-    def __init__(self, vertices, triangles):
+    A closed surface's side is its winding number; an open one's is the side of the
+    nearest point's pseudo-normal (the face's normal, or at an edge or corner the sum of
+    its faces' normals, weighted by their angles at a corner: Baerentzen & Aanaes 2005),
+    and a point nearest to the rim lies beyond the surface's edge, on no side of it
+    (+inf): an open tank's walls end where its faces end."""
+
+    def __init__(self, vertices, triangles, open=False):
         self.vertices = np.asarray(vertices, dtype=float)
         self.triangles = np.asarray(triangles, dtype=np.int64)
+        self.open = bool(open)
+        self._normals = _pseudo_normals(self.vertices, self.triangles)
+        self._layers = (self._normals[0], *_fans(self.triangles, len(self.vertices)),
+                        self.triangles, _neighbours(self.triangles))
 
     def bounds(self):
         return self.vertices.min(axis=0), self.vertices.max(axis=0)
 
     def lattice_distance(self, lattice, reach=0.0):
+        """The signed distance (> 0 outside a closed surface, on the facing side of an open
+        one) at the block's points, within ``reach`` counted as a tank's layers count it
+        (:func:`_layer_depth`), +-inf beyond; ``reach`` 0: the sign alone."""
         from parmps.geometry.mesh import lattice_winding
 
+        if self.open and not reach:
+            raise ValueError("an open surface has no inside: its sides are known within reach")
+        corners = np.ascontiguousarray(self.vertices[self.triangles])
+        if reach:
+            # A square corner's points lie up to sqrt(3) times their depth from its vertex.
+            search = reach * math.sqrt(3.0)
+            best = np.full(lattice.shape, search * search)
+            which = np.full(lattice.shape, -1, np.int64)
+            _band_distance(corners, lattice.corner, lattice.spacing, np.array(lattice.shape),
+                           float(search), best, which)
+            band = which >= 0
+            points, nearest = lattice.points(band), lattice.values(which, band)
+            depth = _layer_depth(points, nearest, corners, *self._layers)
+            # Beyond reach the distance is only known to exceed it.
+            depth[depth > reach] = np.inf
+        if self.open:
+            side = _open_signed(points, nearest, corners, *self._normals)
+            signed = np.full(lattice.shape, np.inf)
+            # points() runs x fastest: set the values in that order too.
+            signed.T[band.T] = np.where(np.isinf(side), np.inf, np.copysign(depth, side))
+            return signed
         grid = lattice.origin + 0.5 * lattice.spacing
         winding = lattice_winding(self.vertices, self.triangles, lattice.spacing, grid,
                                   lattice.low, lattice.shape)
         sign = np.where(winding > 0.5, -1.0, 1.0)
         if not reach:
             return sign * np.inf
-        best = np.full(lattice.shape, reach * reach)
-        corners = np.ascontiguousarray(self.vertices[self.triangles])
-        _band_distance(corners, lattice.corner, lattice.spacing, np.array(lattice.shape),
-                       float(reach), best)
-        # Beyond reach the distance is only known to exceed it.
-        distance = np.where(best < reach * reach, np.sqrt(best), np.inf)
+        distance = np.full(lattice.shape, np.inf)
+        distance.T[band.T] = depth
         return sign * distance
+
+    def open_signed_distance(self, points):
+        """An open surface's signed distance at any ``points`` (k, 3), as
+        :meth:`lattice_distance` counts it, by the nearest of all its triangles: +inf
+        beyond its rim, > 0 on the side its triangles face."""
+        corners = np.ascontiguousarray(self.vertices[self.triangles])
+        points = np.ascontiguousarray(points, dtype=float)
+        nearest = _nearest_triangle(points, corners)
+        side = _open_signed(points, nearest, corners, *self._normals)
+        depth = _layer_depth(points, nearest, corners, *self._layers)
+        return np.where(np.isinf(side), np.inf, np.copysign(depth, side))
 
     def samples(self, step):
         return mesh_samples(self.vertices, self.triangles, step)
+
+
+def _fans(triangles, n_vertices):
+    """The triangles around each vertex as (start (n + 1,), triangles): vertex v's are
+    ``triangles[start[v]:start[v + 1]]``."""
+    vertex = triangles.ravel()
+    order = np.argsort(vertex, kind="stable")
+    start = np.zeros(n_vertices + 1, np.int64)
+    start[1:] = np.cumsum(np.bincount(vertex, minlength=n_vertices))
+    return start, (order // 3).astype(np.int64)
+
+
+def _neighbours(triangles):
+    """The triangle across each side (ab, bc, ca) of every triangle, (m, 3); -1 on a rim."""
+    from parmps.geometry.mesh import _edge_groups, _half_edges
+
+    start, end, _ = _half_edges(triangles)
+    order, first, counts = _edge_groups(start, end)
+    across = np.full(len(start), -1, np.int64)
+    pair = first[counts == 2]
+    across[order[pair]] = order[pair + 1] // 3
+    across[order[pair + 1]] = order[pair] // 3
+    return across.reshape(-1, 3)
+
+
+def _pseudo_normals(vertices, triangles):
+    """Per triangle: its unit normal (m, 3); at each corner the vertex's angle-weighted
+    normal (m, 3, 3) and whether the vertex is on the rim (m, 3); on each side (ab, bc,
+    ca) the edge's normal, the sum of its faces' (m, 3, 3), and whether it is a rim edge
+    (m, 3)."""
+    from parmps.geometry.mesh import _edge_groups, _half_edges
+
+    x = vertices[triangles]
+    face = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+    face /= np.linalg.norm(face, axis=1)[:, None]
+    angle = np.empty((len(triangles), 3))
+    for c in range(3):
+        u, v = x[:, (c + 1) % 3] - x[:, c], x[:, (c + 2) % 3] - x[:, c]
+        cosine = np.einsum("ij,ij->i", u, v) / (np.linalg.norm(u, axis=1)
+                                                * np.linalg.norm(v, axis=1))
+        angle[:, c] = np.arccos(np.clip(cosine, -1.0, 1.0))
+    vertex = np.zeros_like(vertices)
+    for c in range(3):
+        np.add.at(vertex, triangles[:, c], angle[:, c, None] * face)
+    vertex /= np.linalg.norm(vertex, axis=1)[:, None]
+    start, end, _ = _half_edges(triangles)
+    order, first, counts = _edge_groups(start, end)
+    group = np.empty(len(start), np.int64)
+    group[order] = np.repeat(np.arange(len(first)), counts)
+    edge = np.zeros((len(first), 3))
+    np.add.at(edge, group, np.repeat(face, 3, axis=0))
+    edge /= np.linalg.norm(edge, axis=1)[:, None]
+    rim_edge = (counts == 1)[group].reshape(-1, 3)
+    rim_vertex = np.zeros(len(vertices), bool)
+    rim_vertex[start[rim_edge.ravel()]] = True
+    rim_vertex[end[rim_edge.ravel()]] = True
+    return (face, np.ascontiguousarray(vertex[triangles]), rim_vertex[triangles],
+            np.ascontiguousarray(edge[group].reshape(-1, 3, 3)), rim_edge)
 
 
 def _circle_samples(center, radius, step):
@@ -294,17 +396,18 @@ def _grid_eval(function, lattice, chunk=1 << 20):
 
 
 @numba.njit(cache=True)
-def _triangle_distance2(px, py, pz, t, corners):
-    """Squared distance from p to triangle t of ``corners`` (m, 3, 3) (Ericson, Real-Time
-    Collision Detection 5.1.5, the regions of the corners, the edges and the face), in
-    scalars: no temporary arrays in the innermost loop."""
+def _closest(px, py, pz, t, corners):
+    """p minus its closest point on triangle t of ``corners`` (m, 3, 3), and the region that
+    point lies in: 0 the face, 1-3 the corners a, b, c, 4-6 the sides ab, bc, ca (Ericson,
+    Real-Time Collision Detection 5.1.5), in scalars: no temporary arrays in the innermost
+    loop."""
     ax, ay, az = corners[t, 0, 0], corners[t, 0, 1], corners[t, 0, 2]
     abx, aby, abz = corners[t, 1, 0] - ax, corners[t, 1, 1] - ay, corners[t, 1, 2] - az
     acx, acy, acz = corners[t, 2, 0] - ax, corners[t, 2, 1] - ay, corners[t, 2, 2] - az
     apx, apy, apz = px - ax, py - ay, pz - az
     d1 = abx * apx + aby * apy + abz * apz
     d2 = acx * apx + acy * apy + acz * apz
-    v, w = 0.0, 0.0
+    v, w, region = 0.0, 0.0, 1
     if d1 > 0.0 or d2 > 0.0:
         bpx, bpy, bpz = apx - abx, apy - aby, apz - abz
         d3 = abx * bpx + aby * bpy + abz * bpz
@@ -316,31 +419,113 @@ def _triangle_distance2(px, py, pz, t, corners):
         vb = d5 * d2 - d1 * d6
         va = d3 * d6 - d5 * d4
         if d3 >= 0.0 and d4 <= d3:
-            v, w = 1.0, 0.0
+            v, w, region = 1.0, 0.0, 2
         elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-            v, w = d1 / (d1 - d3), 0.0
+            v, w, region = d1 / (d1 - d3), 0.0, 4
         elif d6 >= 0.0 and d5 <= d6:
-            v, w = 0.0, 1.0
+            v, w, region = 0.0, 1.0, 3
         elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-            v, w = 0.0, d2 / (d2 - d6)
+            v, w, region = 0.0, d2 / (d2 - d6), 6
         elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
             w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-            v = 1.0 - w
+            v, region = 1.0 - w, 5
         else:
             total = va + vb + vc
-            v, w = vb / total, vc / total
+            v, w, region = vb / total, vc / total, 0
     gx = apx - v * abx - w * acx
     gy = apy - v * aby - w * acy
     gz = apz - v * abz - w * acz
+    return gx, gy, gz, region
+
+
+@numba.njit(cache=True)
+def _triangle_distance2(px, py, pz, t, corners):
+    """Squared distance from p to triangle t of ``corners`` (m, 3, 3)."""
+    gx, gy, gz, _ = _closest(px, py, pz, t, corners)
     return gx * gx + gy * gy + gz * gz
 
 
 @numba.njit(cache=True)
-def _band_distance(corners, first, spacing, shape, reach, best):
+def _open_signed(points, which, corners, face, corner_normal, corner_rim, side_normal,
+                 side_rim):
+    """Signed distance of ``points`` (k, 3) to their nearest triangles ``which`` (k,) of an
+    open surface: the distance, signed by the nearest point's pseudo-normal (> 0 on the
+    side the triangles face), +inf where that point is on the rim."""
+    out = np.empty(len(points))
+    for n in range(len(points)):
+        t = which[n]
+        gx, gy, gz, region = _closest(points[n, 0], points[n, 1], points[n, 2], t, corners)
+        if region == 0:
+            nx, ny, nz, rim = face[t, 0], face[t, 1], face[t, 2], False
+        elif region <= 3:
+            c = region - 1
+            nx, ny, nz = corner_normal[t, c, 0], corner_normal[t, c, 1], corner_normal[t, c, 2]
+            rim = corner_rim[t, c]
+        else:
+            e = region - 4
+            nx, ny, nz = side_normal[t, e, 0], side_normal[t, e, 1], side_normal[t, e, 2]
+            rim = side_rim[t, e]
+        distance = math.sqrt(gx * gx + gy * gy + gz * gz)
+        out[n] = np.inf if rim else (distance if gx * nx + gy * ny + gz * nz >= 0.0
+                                     else -distance)
+    return out
+
+
+@numba.njit(cache=True)
+def _nearest_triangle(points, corners):
+    """The index of each point's nearest triangle, over all of them (k m work)."""
+    which = np.empty(len(points), np.int64)
+    for n in range(len(points)):
+        best = np.inf
+        for t in range(corners.shape[0]):
+            d2 = _triangle_distance2(points[n, 0], points[n, 1], points[n, 2], t, corners)
+            if d2 < best:
+                best, which[n] = d2, t
+    return which
+
+
+@numba.njit(cache=True)
+def _layer_depth(points, which, corners, face, fan_start, fan_faces, triangles, neighbour):
+    """How deep ``points`` (k, 3) lie behind their nearest triangles ``which``, as a tank's
+    layers count it: the distance to the nearest point where that is inside a face, else
+    the largest distance to the planes of the faces meeting at the nearest edge or corner
+    (a box's layers turn its edges and corners square, as a tank's do, where the distance
+    to the edge would round them; on a finely faceted curve the two agree)."""
+    out = np.empty(len(points))
+    for n in range(len(points)):
+        t = which[n]
+        px, py, pz = points[n, 0], points[n, 1], points[n, 2]
+        gx, gy, gz, region = _closest(px, py, pz, t, corners)
+        if region == 0:
+            out[n] = math.sqrt(gx * gx + gy * gy + gz * gz)
+            continue
+        deepest = 0.0
+        if region <= 3:
+            vertex = triangles[t, region - 1]
+            for k in range(fan_start[vertex], fan_start[vertex + 1]):
+                deepest = max(deepest, _plane_distance(px, py, pz, fan_faces[k], corners, face))
+        else:
+            deepest = _plane_distance(px, py, pz, t, corners, face)
+            other = neighbour[t, region - 4]
+            if other >= 0:
+                deepest = max(deepest, _plane_distance(px, py, pz, other, corners, face))
+        out[n] = deepest
+    return out
+
+
+@numba.njit(cache=True)
+def _plane_distance(px, py, pz, t, corners, face):
+    """|distance| from p to the plane of triangle t."""
+    return abs((px - corners[t, 0, 0]) * face[t, 0] + (py - corners[t, 0, 1]) * face[t, 1]
+               + (pz - corners[t, 0, 2]) * face[t, 2])
+
+
+@numba.njit(cache=True)
+def _band_distance(corners, first, spacing, shape, reach, best, which):
     """The least squared distance to the triangles (m, 3, 3), into ``best`` (the block's
-    shape, holding reach^2 or less), of the lattice points ``first + spacing index``
-    within ``reach`` of each triangle's bounding box: cost the triangles times the
-    points near each."""
+    shape, holding reach^2 or less), and the triangle it is to, into ``which``, of the
+    lattice points ``first + spacing index`` within ``reach`` of each triangle's bounding
+    box: cost the triangles times the points near each."""
     for t in range(corners.shape[0]):
         lo = np.empty(3, np.int64)
         hi = np.empty(3, np.int64)
@@ -358,3 +543,4 @@ def _band_distance(corners, first, spacing, shape, reach, best):
                     d2 = _triangle_distance2(px, py, pz, t, corners)
                     if d2 < best[i, j, k]:
                         best[i, j, k] = d2
+                        which[i, j, k] = t

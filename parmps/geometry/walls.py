@@ -87,9 +87,9 @@ def shape_bounds(spec):
     return None
 
 
-def surface_of(label, spec, domain):
-    """The surface of a ``[[wall]]`` or shaped ``[[fluid_block]]``: a primitive, or the
-    checked closed mesh of its file."""
+def surface_of(label, spec, domain, wall=False):
+    """The surface of a ``[[wall]]`` (``wall``) or shaped ``[[fluid_block]]``: a primitive,
+    or the checked mesh of its file (a wall's may be open)."""
     dimension = domain.dimension
     if spec["shape"] == "sphere":
         return Sphere(spec["center"], spec["radius"])
@@ -97,11 +97,11 @@ def surface_of(label, spec, domain):
         return Cylinder(spec["center"], spec["radius"], spec["axis"], spec["length"])
     if spec["shape"] == "box":
         return Box(spec["lower"], spec["upper"])
-    return _mesh_surface(label, spec, dimension, domain)
+    return _mesh_surface(label, spec, dimension, domain, wall)
 
 
-def _mesh_surface(label, spec, dimension, domain):
-    from parmps.geometry.mesh import check_closed_surface, read_mesh
+def _mesh_surface(label, spec, dimension, domain, wall):
+    from parmps.geometry.mesh import check_closed_surface, check_wall_surface, read_mesh
 
     source = f"{label}.mesh '{spec['mesh']}'"
     if dimension != 3:
@@ -111,11 +111,34 @@ def _mesh_surface(label, spec, dimension, domain):
         raise CaseError(f"{source}: no such file (a relative path is from the case file's "
                         f"directory)")
     vertices, triangles = read_mesh(spec["mesh"], source)
-    check_closed_surface(source, vertices, triangles, single=False)
+    is_open = False
+    if wall:
+        is_open = check_wall_surface(source, vertices, triangles)
+        _check_fluid_side(label, spec, is_open)
+    else:
+        check_closed_surface(source, vertices, triangles, single=False)
     if spec.get("lower") is None:  # a clipped fill may come from a larger surface
         check_inside_domain(source, vertices, domain)
-    log.debug("%s: %d vertices, %d triangles", source, len(vertices), len(triangles))
-    return MeshSurface(vertices, triangles)
+    log.debug("%s: %d vertices, %d triangles%s", source, len(vertices), len(triangles),
+              ", open" if is_open else "")
+    return MeshSurface(vertices, triangles, open=is_open)
+
+
+def _check_fluid_side(label, spec, is_open):
+    """An open surface's fluid is on the side its triangles face; a closed one's is given."""
+    if is_open and spec["fluid"]:
+        raise CaseError(f"{label}.fluid does not apply to an open surface (its mesh has a "
+                        f"rim): the fluid lies on the side its triangles face; leave out "
+                        f"fluid, or close the surface")
+    if not is_open and not spec["fluid"]:
+        raise CaseError(f"missing key '{label}.fluid': which side of the closed surface the "
+                        f"fluid is on, \"inside\" (a vessel) or \"outside\" (an obstacle)")
+
+
+def fluid_outside(spec, surface):
+    """Whether a wall's fluid lies outside its surface, on the side its normals point to:
+    an obstacle, or an open surface."""
+    return spec["fluid"] == "outside" or getattr(surface, "open", False)
 
 
 def check_inside_domain(source, vertices, domain):
@@ -148,7 +171,7 @@ def wall_particles(label, spec, surface, origin, spacing, domain):
                                     np.asarray(high) + reach)
     signed = surface.lattice_distance(lattice, reach)
     # Into the material: inside the surface when the fluid is outside it.
-    into = -signed if spec["fluid"] == "outside" else signed
+    into = -signed if fluid_outside(spec, surface) else signed
     band = (into >= 0.0) & (into <= depth * (1.0 + _TOLERANCE))
     position = lattice.points(band)
     kind = np.where(lattice.values(into, band) <= spec["wall_layers"] * spacing
@@ -206,7 +229,7 @@ class Side:
     def material(self, points):
         """Which of ``points`` lie in the wall's material (s >= 0), at any depth: the water
         of a block that covers an obstacle is not kept inside it."""
-        lattice, outside = self.lattice, self.spec["fluid"] == "outside"
+        lattice, outside = self.lattice, fluid_outside(self.spec, self.surface)
         # Into the material is outside the surface for a vessel, inside for an obstacle.
         into = np.full(len(points), -np.inf if outside else np.inf)
         index = (points - lattice.origin) / lattice.spacing - 0.5 - lattice.low
@@ -228,6 +251,8 @@ def _signed_at(surface, points):
     only its sign, -1 inside and +1 outside."""
     if hasattr(surface, "signed_distance"):
         return surface.signed_distance(points)
+    if surface.open:
+        return surface.open_signed_distance(points)
     from parmps.geometry.mesh import points_inside
 
     return np.where(points_inside(points, surface.vertices, surface.triangles), -1.0, 1.0)
@@ -241,9 +266,9 @@ def probed_walls(case):
     for k, spec in enumerate(case["wall"]):
         if spec["name"] in wanted:
             label = f"wall[{k}] '{spec['name']}'"
-            surface = surface_of(label, spec, Domain.from_case(case))
+            surface = surface_of(label, spec, Domain.from_case(case), wall=True)
             points, weights, outward = surface.samples(0.5 * case["particles"]["spacing"])
-            into = outward if spec["fluid"] == "outside" else -outward
+            into = outward if fluid_outside(spec, surface) else -outward
             out[spec["name"]] = (points, weights, into)
     return out
 
@@ -262,7 +287,7 @@ class MaterialDepth:
         self.walls = []
         for k, spec in enumerate(case.get("wall", ())):
             label = f"wall[{k}] '{spec['name']}'" if spec["name"] else f"wall[{k}]"
-            surface = surface_of(label, spec, domain)
+            surface = surface_of(label, spec, domain, wall=True)
             reach = (spec["wall_layers"] + spec["dummy_layers"] + 2) * spacing
             grid = None
             if not hasattr(surface, "signed_distance"):
@@ -286,7 +311,7 @@ class MaterialDepth:
             at = points - np.asarray(shifts[k], dtype=float)
             signed = (surface.signed_distance(at) if grid is None
                       else _interpolate(*grid, at, reach))
-            into = -signed if spec["fluid"] == "outside" else signed
+            into = -signed if fluid_outside(spec, surface) else signed
             deeper = into > deepest
             deepest[deeper], which[deeper] = into[deeper], k
         return deepest, which

@@ -2,6 +2,8 @@
 that the walls and fluid from files are tested on files another tool wrote:
 
 - box.stl: the box [0, 0.2] x [0, 0.1] x [0, 0.1] m, 12 outward triangles (ASCII);
+- open_box.stl: the same box without its top, 10 triangles facing in (ASCII): an open
+  surface, a tank whose water is on the side its triangles face;
 - cylinder.stl: a cylinder of radius 0.05 m about the vertical line x = y = 0.1 m,
   z in [0.05, 0.15] m, a 128-sided prism with fans on its ends (ASCII);
 - pipe.stl: a pipe of radius 8 mm about the x axis, x in [-8, 20] mm, a 128-sided prism with
@@ -33,6 +35,14 @@ def box(lower, upper):
     return np.column_stack([x, y, z]), np.array(triangles)
 
 
+def open_box(lower, upper):
+    """:func:`box` without its top (+z) face, triangles 2 and 3, the others reversed to
+    face in."""
+    points, triangles = box(lower, upper)
+    keep = [t for k, t in enumerate(triangles) if k not in (2, 3)]
+    return points, np.array(keep)[:, ::-1]
+
+
 def cylinder(center, radius, low, high, sides):
     angle = 2 * np.pi * np.arange(sides) / sides
     ring = np.column_stack([center[0] + radius * np.cos(angle),
@@ -59,6 +69,7 @@ def along_x(points, triangles):
 def main():
     for name, (points, triangles) in {
             "box.stl": box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1)),
+            "open_box.stl": open_box((0.0, 0.0, 0.0), (0.2, 0.1, 0.1)),
             "cylinder.stl": cylinder((0.1, 0.1), 0.05, 0.05, 0.15, 128)}.items():
         meshio.write(os.path.join(HERE, name), meshio.Mesh(points, [("triangle", triangles)]),
                      binary=False)
