@@ -114,3 +114,19 @@ def test_cases_refuses_a_pattern_matching_nothing(tmp_path):
     result = run_parmps(["validate", "--cases", "--case-glob", "nothing_like_this"], timeout=60)
     assert result.returncode == 2
     assert error_lines(result.stderr) == ["parmps: error: validate: no case matches cases/nothing_like_this.toml"]
+
+
+def test_a_validation_runs_the_cases_it_compares_with_beside_its_own(tmp_path):
+    # SPHERIC Test 2 from meshes beside the box-built case ([run] beside), coarse (0.55/5 m)
+    # and a few steps: both run alike, and the metric reads both. The full comparison (2 s,
+    # 0.55/15 m): python -m parmps validate dam_break_3d_meshed (docs/validation).
+    result = run_parmps(["validate", "dam_break_3d_meshed", "-n", "1", "-o", tmp_path,
+                         "--end-time", "0.01", "--set", "particles.spacing=0.11"], timeout=300)
+    record = json.loads(result.stdout.strip().splitlines()[-1])
+    assert (tmp_path / "dam_break_3d_meshed-boxes" / "result.h5").is_file()
+    counts = record["measured"]["counts"]
+    assert counts["compared_with"] == "boxes" and counts["total"] > 4000
+    assert counts["total"] == counts["total_beside"] and counts["wall"] == counts["wall_beside"]
+    assert record["verdicts"]["counts.total_error"]["pass"]
+    # Too short for an impact: the probes' figures are NaN and fail, so the run does not pass.
+    assert record["passed"] is False and result.returncode == 1

@@ -1323,3 +1323,43 @@ def inlet_channel(path, case, section, start):
                            / peak ** 2)
     return {"flow_rate": delivered / (mean.integral(end) * width) - 1.0,
             "profile_rms": float(np.sqrt(np.mean(squares))), "end": end}
+
+
+# --------------------------------------------------------------------------
+# One scene built two ways: the same scene from meshes against its boxes
+
+def _kind_counts(path):
+    """Fluid, wall and dummy particles, and all of them, of a result's first frame."""
+    from parmps.core.particles import DUMMY, WALL
+    with open_result(path) as result:
+        kind = np.asarray(result.frames[0].kind)
+    return {"fluid": int(np.sum(kind == FLUID)), "wall": int(np.sum(kind == WALL)),
+            "dummy": int(np.sum(kind == DUMMY)), "total": int(len(kind))}
+
+
+def built_alike(path, case, beside, probes, window, arrival_threshold):
+    """A run against the same scene built another way (``beside``: {name: its result}, one
+    entry): ``counts`` (each kind's and the total's, with ``<kind>_error`` the relative
+    difference) and, per pressure probe of ``probes``, the ``mean`` over ``window`` [s]
+    and the ``arrival`` (the first reading above ``arrival_threshold`` [Pa]) of each run,
+    with ``mean_error`` (relative) and ``arrival_error`` [s]."""
+    if len(beside) != 1:
+        raise ValueError(f"built_alike compares with one other run, got {len(beside)}")
+    (other_name, other), = beside.items()
+    mine, theirs = _kind_counts(path), _kind_counts(other)
+    counts = {"compared_with": other_name, **{f"{k}": v for k, v in mine.items()},
+              **{f"{k}_beside": v for k, v in theirs.items()},
+              **{f"{k}_error": mine[k] / theirs[k] - 1.0 if theirs[k] else 0.0
+                 for k in mine}}
+    out = {"counts": counts}
+    for name in probes:
+        rows = []
+        for result in (path, other):
+            t, p = read_probe(result, name)
+            rows.append((window_mean(t, p, *window), first_crossing(t, p, arrival_threshold)))
+        (mean, arrival), (mean_beside, arrival_beside) = rows
+        out[name] = {"mean": mean, "mean_beside": mean_beside, "arrival": arrival,
+                     "arrival_beside": arrival_beside,
+                     "mean_error": mean / mean_beside - 1.0,
+                     "arrival_error": arrival - arrival_beside}
+    return out

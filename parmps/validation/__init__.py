@@ -93,7 +93,9 @@ class Validation:
         ``[run] end_time`` [s], or ``until`` over the metric's time scale (``time_scale``, a
         function of ``parmps.tools.analysis`` of the case), or None (the case's own end);
         ``sets`` are ``[run] sets``, ``time.output_interval`` from ``[run] output_interval``
-        and ``overrides``, as ``--set`` takes them."""
+        and ``overrides``, as ``--set`` takes them. ``[run] beside`` names cases of
+        ``[other_cases]`` run the same way for a metric that compares with them
+        (parmps.validation.command.run_beside)."""
         from parmps.tools import analysis
         run = self.run
         sets = list(run.get("sets", []))

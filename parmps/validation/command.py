@@ -87,11 +87,42 @@ def scalars(value):
     return None
 
 
-def measure(check, path):
+def run_beside(check, args, path):
+    """The results of the other cases ``[run] beside`` names (keys of ``[other_cases]``),
+    run as the validation's own case is, for a metric that compares with them
+    (``beside = {name: result}``): {} when it names none, None when one did not run. With
+    ``--result`` (``path``, the validation's own result) they are read from beside it,
+    ``<its folder>/../<validation>-<name>/``, where a validation run puts them."""
+    from parmps import validation
+    from parmps.validation import launch
+    names = check.run.get("beside", [])
+    if not names:
+        return {}
+    out = {}
+    for name in names:
+        if args.result is not None:
+            other = os.path.join(os.path.dirname(os.path.abspath(path)), os.pardir,
+                                 f"{check.name}-{name}", "result.h5")
+        else:
+            end_time, sets = check.run_arguments(args.set)
+            if args.end_time is not None:
+                end_time = args.end_time
+            folder = os.path.abspath(os.path.join(args.output, f"{check.name}-{name}"))
+            other = launch.run(check.other_cases[name], folder, sets, end_time,
+                               ranks=args.ranks, timeout=args.timeout,
+                               root=validation.ROOT)["result"]
+        if not os.path.isfile(other):
+            return None
+        out[name] = os.path.normpath(other)
+    return out
+
+
+def measure(check, path, beside=None):
     """(figures, verdicts, error) of a result: the metric's scalars and each tolerance's
-    verdict, or the reason it could not be measured."""
+    verdict, or the reason it could not be measured; ``beside``: the other runs it is
+    compared with, if any."""
     try:
-        measured = check.measure(path)
+        measured = check.measure(path, **({"beside": beside} if beside else {}))
     except (CaseError, ValueError, KeyError, IndexError) as exc:
         return {}, {}, f"{type(exc).__name__}: {exc}"
     return scalars(measured), check.verdicts(measured), ""
@@ -131,7 +162,11 @@ def validate_one(check, args):
         if not os.path.isfile(path):
             record["passed"] = False
             return record
-    figures, verdicts, error = measure(check, path)
+    beside = run_beside(check, args, path)
+    if beside is None:
+        record["passed"] = False
+        return record
+    figures, verdicts, error = measure(check, path, beside)
     record.update(result=path, measured=figures, verdicts=verdicts,
                   not_judged=not_judged(check, verdicts))
     if error:
