@@ -566,3 +566,65 @@ def test_a_clipped_fill_may_come_from_a_surface_larger_than_the_domain(tmp_path)
     assert len(clipped.position) == 1000
     with pytest.raises(CaseError, match="the mesh lies outside the domain"):
         build(no_block + f'[[fluid_block]]\nmesh = "{large}"\n')
+
+
+# --------------------------------------------------------------------------
+# 2D walls from curves (line cells)
+
+def _write_curve(path, points, closed):
+    segments = [(k, k + 1) for k in range(len(points) - 1)]
+    if closed:
+        segments.append((len(points) - 1, 0))
+    meshio.write(path, meshio.Mesh(np.column_stack([points, np.zeros(len(points))]),
+                                   [("line", np.array(segments))]))
+    return path
+
+
+def test_an_open_curve_lays_a_2d_tanks_particles(tmp_path):
+    # The 2D tank of STILL_2D as a curve down its right wall, along the floor, up its left
+    # one (each segment facing the water on its right-hand side), no lid: a tank's every
+    # particle, each of the same kind.
+    curve = _write_curve(tmp_path / "tank.vtk", [[0.4, 0.3], [0.4, 0.0], [0.0, 0.0],
+                                                 [0.0, 0.3]], closed=False)
+    case, tank, _, _ = build(STILL_2D)
+    case, meshed, _, _ = build(STILL_2D.replace("[[tank]]\nlower = [0.0, 0.0]\n"
+                                                "upper = [0.4, 0.3]\n",
+                                                f'[[wall]]\nmesh = "{curve}"\n'))
+    assert _same_particles(meshed, tank)
+
+
+def test_a_closed_curve_lays_a_circles_wall_as_its_shape_does(tmp_path):
+    # A 512-gon of the circle r = 0.05 about (0.2, 0.12), counter-clockwise: the wall of the
+    # same circle given as a shape, but for points within a hair of a layer's edge.
+    angle = 2.0 * math.pi * np.arange(512) / 512
+    ring = np.column_stack([0.2 + 0.05 * np.cos(angle), 0.12 + 0.05 * np.sin(angle)])
+    curve = _write_curve(tmp_path / "post.vtk", ring, closed=True)
+    water = STILL_2D.replace("upper = [0.4, 0.2]\n", "upper = [0.4, 0.25]\n")
+    _, meshed, _, _ = build(water + f'[[wall]]\nmesh = "{curve}"\nfluid = "outside"\n')
+    _, shaped, _, _ = build(water + '[[wall]]\nshape = "cylinder"\ncenter = [0.2, 0.12]\n'
+                                    'radius = 0.05\nfluid = "outside"\n')
+    for kind in (FLUID, WALL, DUMMY):
+        assert abs((meshed.kind == kind).sum() - (shaped.kind == kind).sum()) <= 4, kind
+    # The post's particles (the tank's lie farther off) within its layers' depth inside it.
+    radius = np.linalg.norm(meshed.position - [0.2, 0.12], axis=1)
+    mine = ((meshed.kind == WALL) | (meshed.kind == DUMMY)) & (radius < 0.1)
+    depth = 0.05 - radius[mine]
+    assert depth.min() >= -1e-4 and depth.max() <= 4 * L0 + 1e-4
+
+
+@pytest.mark.parametrize("points, closed, phrase", [
+    ([[0.1, 0.1], [0.3, 0.1], [0.3, 0.2], [0.1, 0.2]][::-1], True, "runs clockwise"),
+    ([[0.1, 0.1], [0.3, 0.1], [0.3, 0.2]], False, None),
+])
+def test_a_2d_curves_mistakes_are_refused(tmp_path, points, closed, phrase):
+    curve = _write_curve(tmp_path / "c.vtk", np.array(points), closed)
+    text = STILL_2D + f'[[wall]]\nmesh = "{curve}"\n' + ('fluid = "outside"\n' if closed else '')
+    if phrase is None:  # an open curve given a side
+        phrase = "fluid does not apply to an open surface"
+        text += 'fluid = "outside"\n'
+    with pytest.raises(CaseError, match=phrase):
+        build(text)
+    flipped = np.array(points)
+    segments = np.array([(0, 1), (2, 1)])
+    with pytest.raises(CaseError, match="inconsistent orientation or a branch"):
+        mesh.check_polyline("c", flipped[:3], segments)

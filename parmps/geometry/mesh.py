@@ -263,6 +263,81 @@ def check_wall_surface(source, vertices, triangles):
     return True
 
 
+def check_polyline(source, vertices, segments):
+    """Refuse, in one line starting with ``source``, a 2D wall's curve that is not a
+    consistently oriented, manifold polyline (each vertex starting at most one segment and
+    ending at most one, no segment without length); a closed one must run counter-clockwise
+    (its segments' right-hand sides facing out). Returns whether it is open (has ends)."""
+    vertices = np.asarray(vertices, dtype=float)
+    segments = np.asarray(segments, dtype=np.int64)
+    if not len(segments):
+        raise CaseError(f"{source}: the mesh has no line segments")
+    length = np.linalg.norm(vertices[segments[:, 1]] - vertices[segments[:, 0]], axis=1)
+    if np.any(length <= 1e-12 * float(np.ptp(vertices, axis=0).max())):
+        k = int(np.argmin(length))
+        raise CaseError(f"{source}: segment {k} has no length (vertices "
+                        f"{segments[k, 0]} and {segments[k, 1]})")
+    starts = np.bincount(segments[:, 0], minlength=len(vertices))
+    ends = np.bincount(segments[:, 1], minlength=len(vertices))
+    for count, what in ((starts, "start"), (ends, "end")):
+        if count.max() > 1:
+            v = int(np.argmax(count))
+            raise CaseError(f"{source}: inconsistent orientation or a branch: {int(count[v])} "
+                            f"segments {what} at vertex {v} ({vertices[v, 0]:.6g}, "
+                            f"{vertices[v, 1]:.6g}); each vertex starts one segment and ends "
+                            f"one")
+    if np.any(starts + ends == 0):
+        raise CaseError(f"{source}: {int(np.sum(starts + ends == 0))} unused vertices (on no "
+                        f"segment); remove them")
+    is_open = bool(np.any(starts != ends))
+    if not is_open and enclosed_volume(vertices, segments) < 0:
+        raise CaseError(f"{source}: the closed curve runs clockwise (its area "
+                        f"{enclosed_volume(vertices, segments):.6g}); reverse its segments: "
+                        f"parmps refuses rather than reorder them")
+    return is_open
+
+
+def read_polyline(path, source=None):
+    """Vertices (n, 2) and line segments (m, 2) of a 2D curve in a mesh file meshio reads
+    (Gmsh, VTK, ...: its ``line`` cells), its points in one plane z = constant; duplicates
+    merged within MERGE_TOLERANCE of the median segment. Not checked: :func:`check_polyline`."""
+    import meshio
+
+    source = source or f"mesh '{path}'"
+    try:
+        mesh = meshio.read(path)
+    except Exception as exc:  # noqa: BLE001 (meshio's many exception types: bad input)
+        raise CaseError(f"{source}: cannot be read: "
+                        f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                        ) from None
+    points = np.asarray(mesh.points, dtype=float)
+    if points.shape[1] == 3:
+        if np.ptp(points[:, 2]) > 1e-9 * max(float(np.ptp(points[:, :2], axis=0).max()), 1e-300):
+            raise CaseError(f"{source}: a 2D wall's curve lies in a plane z = constant; its "
+                            f"points span z in [{points[:, 2].min():.6g}, "
+                            f"{points[:, 2].max():.6g}]")
+        points = points[:, :2]
+    lines = [block.data for block in mesh.cells if block.type == "line"]
+    if not lines:
+        kinds = ", ".join(sorted({block.type for block in mesh.cells})) or "none"
+        raise CaseError(f"{source}: no line segments (cells: {kinds}); a 2D wall is a curve "
+                        f"of line cells")
+    segments = np.concatenate(lines).astype(np.int64)
+    if segments.min() < 0 or segments.max() >= len(points):
+        raise CaseError(f"{source}: a cell names a point the file does not have")
+    unused = len(points) - len(np.unique(segments))
+    if unused:
+        raise CaseError(f"{source}: {unused} unused points (on no segment); remove them")
+    scale = float(np.median(np.linalg.norm(points[segments[:, 1]] - points[segments[:, 0]],
+                                           axis=1)))
+    if not scale > 0:
+        raise CaseError(f"{source}: the segments have no length (median 0)")
+    # merge_vertices bins in 3D: the plane's points at z = 0.
+    flat = np.column_stack([points, np.zeros(len(points))])
+    vertices, segments = merge_vertices(flat, segments, MERGE_TOLERANCE * scale)
+    return vertices[:, :2], segments
+
+
 def merge_vertices(vertices, triangles, tolerance):
     """Merge vertices closer than ``tolerance`` in every coordinate; drop unused ones.
 

@@ -284,6 +284,88 @@ class MeshSurface:
         return mesh_samples(self.vertices, self.triangles, step)
 
 
+class PolylineSurface:
+    """A 2D wall's curve: vertices (n, 2) and segments (m, 2) of a polyline mesh checked by
+    :func:`parmps.geometry.mesh.check_polyline`, each segment a -> b facing its right-hand
+    side (dy, -dx): a closed loop counter-clockwise (facing out), or ``open`` (with two
+    ends), its fluid on the side its segments face.
+
+    The signed distance is the nearest point's, signed by its pseudo-normal (a segment's
+    normal, at a vertex the sum of its two segments'), > 0 on the facing side, and a point
+    nearest to an open curve's end lies beyond it, on no side (+inf). As for meshes, a point
+    behind a vertex is as deep as it is from the farther of its two segments' lines (square
+    corners, a tank's layers)."""
+
+    # Point-segment pairs a vectorised pass holds (a few arrays of this many pairs).
+    PAIRS = 1 << 21
+
+    def __init__(self, vertices, segments, open=False):
+        self.vertices = np.asarray(vertices, dtype=float)
+        self.segments = np.asarray(segments, dtype=np.int64)
+        self.open = bool(open)
+        a, b = self.vertices[self.segments[:, 0]], self.vertices[self.segments[:, 1]]
+        direction = b - a
+        self._start, self._direction = a, direction
+        self._normal = np.column_stack([direction[:, 1], -direction[:, 0]]) / \
+            np.linalg.norm(direction, axis=1)[:, None]
+        n = len(self.vertices)
+        # Each vertex's segments in and out (-1 at an open curve's ends).
+        self._into, self._out = np.full(n, -1), np.full(n, -1)
+        self._into[self.segments[:, 1]] = np.arange(len(self.segments))
+        self._out[self.segments[:, 0]] = np.arange(len(self.segments))
+
+    def bounds(self):
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    def signed_distance(self, points):
+        points = np.asarray(points, dtype=float)
+        out = np.empty(len(points))
+        chunk = max(1, self.PAIRS // len(self.segments))
+        for begin in range(0, len(points), chunk):
+            out[begin:begin + chunk] = self._signed(points[begin:begin + chunk])
+        return out
+
+    def _signed(self, points):
+        offset = points[:, None, :] - self._start[None]
+        length2 = np.einsum("ij,ij->i", self._direction, self._direction)
+        t = np.clip(np.einsum("kij,ij->ki", offset, self._direction) / length2, 0.0, 1.0)
+        gap = offset - t[..., None] * self._direction[None]
+        distance2 = np.einsum("kij,kij->ki", gap, gap)
+        nearest = np.argmin(distance2, axis=1)
+        rows = np.arange(len(points))
+        t, gap = t[rows, nearest], gap[rows, nearest]
+        # At an end of the segment the nearest point is a vertex: its two segments decide.
+        vertex = np.where(t <= 0.0, self.segments[nearest, 0],
+                          np.where(t >= 1.0, self.segments[nearest, 1], -1))
+        at_vertex = vertex >= 0
+        before, after = self._into[vertex], self._out[vertex]
+        rim = at_vertex & ((before < 0) | (after < 0))
+        normal = self._normal[nearest].copy()
+        corner = at_vertex & ~rim
+        normal[corner] = self._normal[before[corner]] + self._normal[after[corner]]
+        depth = np.sqrt(distance2[rows, nearest])
+        lines = [np.abs(np.einsum("ij,ij->i", points[corner] - self._start[k],
+                                  self._normal[k])) for k in (before[corner], after[corner])]
+        depth[corner] = np.maximum(*lines)
+        signed = np.where(np.einsum("ij,ij->i", gap, normal) >= 0.0, depth, -depth)
+        signed[rim] = np.inf
+        return signed
+
+    def lattice_distance(self, lattice, reach=None):
+        return _grid_eval(self.signed_distance, lattice)
+
+    def samples(self, step):
+        """Points about every ``step`` along each segment, their lengths and the segments'
+        normals (the facing side's)."""
+        lengths = np.linalg.norm(self._direction, axis=1)
+        counts = np.maximum(1, np.ceil(lengths / step).astype(np.int64))
+        segment = np.repeat(np.arange(len(self.segments)), counts)
+        first = np.repeat(np.cumsum(counts) - counts, counts)
+        fraction = (np.arange(len(segment)) - first + 0.5) / counts[segment]
+        points = self._start[segment] + fraction[:, None] * self._direction[segment]
+        return points, (lengths / counts)[segment], self._normal[segment]
+
+
 def _fans(triangles, n_vertices):
     """The triangles around each vertex as (start (n + 1,), triangles): vertex v's are
     ``triangles[start[v]:start[v + 1]]``."""

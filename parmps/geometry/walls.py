@@ -23,7 +23,8 @@ from parmps.core.geometry import format_point
 from parmps.core.particles import DUMMY, WALL
 from parmps.geometry.domain import Domain
 from parmps.errors import CaseError
-from parmps.geometry.surfaces import Box, Cylinder, LatticeBlock, MeshSurface, Sphere
+from parmps.geometry.surfaces import (Box, Cylinder, LatticeBlock, MeshSurface,
+                                      PolylineSurface, Sphere)
 
 log = logging.getLogger(__name__)
 
@@ -104,12 +105,11 @@ def _mesh_surface(label, spec, dimension, domain, wall):
     from parmps.geometry.mesh import check_closed_surface, check_wall_surface, read_mesh
 
     source = f"{label}.mesh '{spec['mesh']}'"
-    if dimension != 3:
-        raise CaseError(f"{source}: a surface mesh gives a 3D wall or fluid; in a 2D case "
-                        f"give shape = \"cylinder\" (a circle), \"sphere\" or \"box\"")
     if not os.path.isfile(spec["mesh"]):
         raise CaseError(f"{source}: no such file (a relative path is from the case file's "
                         f"directory)")
+    if dimension == 2:
+        return _polyline_surface(source, label, spec, domain, wall)
     vertices, triangles = read_mesh(spec["mesh"], source)
     is_open = False
     if wall:
@@ -122,6 +122,21 @@ def _mesh_surface(label, spec, dimension, domain, wall):
     log.debug("%s: %d vertices, %d triangles%s", source, len(vertices), len(triangles),
               ", open" if is_open else "")
     return MeshSurface(vertices, triangles, open=is_open)
+
+
+def _polyline_surface(source, label, spec, domain, wall):
+    """A 2D wall's or fluid's curve from its mesh file's line cells, checked."""
+    from parmps.geometry.mesh import check_polyline, read_polyline
+
+    vertices, segments = read_polyline(spec["mesh"], source)
+    is_open = check_polyline(source, vertices, segments)
+    if wall:
+        _check_fluid_side(label, spec, is_open)
+    elif is_open:
+        raise CaseError(f"{source}: a fluid's curve must be closed, and this one has ends")
+    if spec.get("lower") is None:
+        check_inside_domain(source, vertices, domain)
+    return PolylineSurface(vertices, segments, open=is_open)
 
 
 def _check_fluid_side(label, spec, is_open):
