@@ -6,6 +6,7 @@
                            [--end-time T] [--set SECTION.KEY=VALUE ...]
     python -m parmps bench --solid-cost [--ranks R ...] [--steps S] [--warmup W]
     python -m parmps bench --periodic-cost [--ranks R ...] [--steps S] [--warmup W]
+    python -m parmps bench --setup-cost [--ranks R ...] [--spacing L0]
 
 (``scripts/bench.py`` is the same command.)
 
@@ -46,6 +47,12 @@ four sides, periodic along its axis and driven by a body force (``--scene duct_p
 against the same duct with an inlet buffer at one end and an outlet at the other
 (``--scene duct_open``), A B A B on each rank count, and prints periodicity's extra cost per
 particle-step, ``periodic_cost``, against ``PERIODIC_COST_TARGET`` (5 %).
+
+``--setup-cost`` times the set-up (the scene built, distributed and checked: each worker line's
+``setup_seconds``) of SPHERIC Test 2 from its meshes (``--scene dam_break_3d_meshed``, an open
+tank and a closed box read from STL files) against the same scene from boxes, at about a
+million particles, A B A B on each rank count, and prints the meshed set-up's extra time,
+``setup_cost``, against ``SETUP_COST_TARGET`` (within twice the boxes': 1.0).
 
 ``--time-to-solution`` runs cases/dam_break_2d_peer.toml (the 2D dam break of
 MPS-Basic's and DualSPHysics's examples) as a user would, ``python -m parmps``
@@ -89,7 +96,8 @@ from parmps.validation import ROOT
 
 CASE = os.path.join(ROOT, "cases", "dam_break.toml")
 PEER_CASE = os.path.join(ROOT, "cases", "dam_break_2d_peer.toml")
-SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_break_3d.toml")}
+SCENES = {"dam_break": CASE, "dam_break_3d": os.path.join(ROOT, "cases", "dam_break_3d.toml"),
+          "dam_break_3d_meshed": os.path.join(ROOT, "cases", "dam_break_3d_meshed.toml")}
 # The solid's cost (--solid-cost): a still tank FLUID_CELLS particles a side at l0 = 1 cm
 # around a submerged lattice body of BODY_NODES^3 nodes (10,648: the issue's 10k-node body in
 # a 100k-particle fluid), against the same tank with the body's place filled with water. The
@@ -102,6 +110,10 @@ SOLID_COST_TARGET = 0.10
 # the inlet's buffer); the cost per particle-step of the first over the second, minus one.
 DUCT_SECTION, DUCT_LENGTH = 20, 60
 PERIODIC_COST_TARGET = 0.05
+# A meshed scene's set-up (--setup-cost): SPHERIC Test 2 from its meshes at about a million
+# particles within twice the set-up of the same scene from boxes (target: extra <= 1).
+SETUP_PARTICLES = 1_000_000
+SETUP_COST_TARGET = 1.0
 # The 3D time to solution: 0.55/20 m to t = 0.5 s, half of DualSPHysics's seconds.
 SPACINGS_3D = (0.0275,)
 TIME_TO_SOLUTION_TARGETS_3D = {(0.0275, 1): 423.0, (0.0275, 2): 211.5}
@@ -233,11 +245,13 @@ def _submerged_body(with_body):
 
 def _case(spacing, steps=0, overrides=(), scene_name="dam_break"):
     from parmps import config, schema
+    from parmps.geometry.settings import resolve_paths
     if scene_name in BUILT_SCENES:
         raw = BUILT_SCENES[scene_name]()
     else:
         with open(SCENES[scene_name], "rb") as handle:
             raw = config.load_text(handle.read().decode())
+        resolve_paths(raw, SCENES[scene_name])  # a meshed scene's files, from its case
     for assignment in overrides:
         config.apply_override(raw, assignment)
     if spacing is not None:
@@ -355,7 +369,11 @@ def worker(args):
     case = _case(spacing, steps=args.warmup + args.steps, overrides=args.overrides,
                  scene_name=args.scene)
     directory = comm.bcast(tempfile.mkdtemp(prefix="parmps-bench-") if comm.rank == 0 else None)
+    comm.Barrier()
+    started = time.perf_counter()
     run = Simulation(case, "", comm, directory)
+    # The set-up: the scene built (walls and fluid of any shape laid), distributed, checked.
+    setup_seconds = comm.allreduce(time.perf_counter() - started, op=MPI.MAX)
     tally = _WarmTally(comm, run, args.warmup, solve_traffic)
     run.execute(extra_observers=[Callback(tally)])
     comm.Barrier()
@@ -375,7 +393,7 @@ def worker(args):
     if comm.rank == 0:
         line = {
             "particles": particles, "ranks": comm.size, "steps": args.steps,
-            "seconds": round(seconds, 4),
+            "seconds": round(seconds, 4), "setup_seconds": round(setup_seconds, 3),
             "us_per_particle_step": round(1e6 * seconds / (particles * args.steps), 3),
             "fluid": fluid, "rows_per_step": round(rows),
             "us_per_row_step": round(1e6 * seconds / (max(rows, 1) * args.steps), 3),
@@ -503,14 +521,21 @@ def build_parser():
                         help="run cases/dam_break_2d_peer.toml to --end-time and print the "
                              "wall time, steps, cost and front of each run")
     parser.add_argument("--spacing", type=float, nargs="+",
-                        help="with --time-to-solution: l0 [m] (default 0.005 0.0025)")
+                        help="with --time-to-solution: l0 [m] (default 0.005 0.0025); with "
+                             "--setup-cost: the one l0 [m] (default: about 1M particles)")
     parser.add_argument("--end-time", type=float, default=0.5,
                         help="with --time-to-solution: simulated seconds (default 0.5)")
     parser.add_argument("--scene", choices=tuple(SCENES) + tuple(BUILT_SCENES),
                         default="dam_break",
                         help="dam_break (2D, the default), dam_break_3d (SPHERIC Test 2), "
+                             "dam_break_3d_meshed (the same from meshes), "
                              "body_3d or body_3d_fluid (the --solid-cost pair), "
                              "duct_periodic or duct_open (the --periodic-cost pair)")
+    parser.add_argument("--setup-cost", action="store_true",
+                        help="SPHERIC Test 2 from its meshes against the same scene from "
+                             "boxes at about a million particles (or --spacing), paired A B "
+                             "A B: the meshed set-up's extra time against its target "
+                             "(within twice the boxes')")
     parser.add_argument("--periodic-cost", action="store_true",
                         help="a 3D duct periodic along its axis against the same duct with "
                              "an inlet and an outlet, paired A B A B; periodicity's cost per "
@@ -560,6 +585,8 @@ def main(argv=None):
         return solid_cost(args)
     if args.periodic_cost:
         return periodic_cost(args)
+    if args.setup_cost:
+        return setup_cost(args)
     if args.scaling:
         from parmps.validation import scaling
         status = 0
@@ -649,13 +676,13 @@ def _timed_run(args, scene_name, spacing, ranks):
     return json.loads(lines[-1])
 
 
-def _paired_runs(args, scenes, ranks, figure):
+def _paired_runs(args, scenes, ranks, figure, spacing=BODY_SPACING):
     """``figure`` of each of ``scenes`` (a pair), run in turn twice (A B A B) on ``ranks``
     ranks, one JSON line per run: {scene: [figure, figure]}, or None when a run failed."""
     found = {scene_name: [] for scene_name in scenes}
     for _ in range(2):
         for scene_name in scenes:
-            line = _timed_run(args, scene_name, BODY_SPACING, ranks)
+            line = _timed_run(args, scene_name, spacing, ranks)
             print(json.dumps(dict(line, scene=scene_name)), flush=True)
             if "error" in line:
                 return None
@@ -701,6 +728,31 @@ def periodic_cost(args):
                           "us_periodic": cost["duct_periodic"],
                           "periodic_cost": round(extra, 4), "target": PERIODIC_COST_TARGET,
                           "within_target": extra <= PERIODIC_COST_TARGET}), flush=True)
+    return status
+
+
+def setup_cost(args):
+    """A meshed scene's set-up against the same scene of boxes: SPHERIC Test 2 built from
+    its meshes (cases/dam_break_3d_meshed.toml) and from boxes, at the spacing that gives
+    SETUP_PARTICLES (or ``--spacing``), paired (A B A B) on each rank count, one step each;
+    one JSON line per run, then the summary against SETUP_COST_TARGET."""
+    status = 0
+    args.steps, args.warmup = 1, 1  # the timed step needs one before it
+    spacing = (args.spacing[0] if args.spacing else
+               spacing_for(SETUP_PARTICLES, "dam_break_3d")[0])
+    for ranks in args.ranks or [1]:
+        seconds = _paired_runs(args, ("dam_break_3d", "dam_break_3d_meshed"), ranks,
+                               "setup_seconds", spacing)
+        if seconds is None:
+            return 1
+        ratio = [m / b for m, b in zip(seconds["dam_break_3d_meshed"], seconds["dam_break_3d"])]
+        extra = statistics.median(ratio) - 1.0
+        status = status or int(extra > SETUP_COST_TARGET)
+        print(json.dumps({"ranks": ranks, "spacing": spacing,
+                          "seconds_boxes": seconds["dam_break_3d"],
+                          "seconds_meshed": seconds["dam_break_3d_meshed"],
+                          "setup_cost": round(extra, 4), "target": SETUP_COST_TARGET,
+                          "within_target": extra <= SETUP_COST_TARGET}), flush=True)
     return status
 
 
