@@ -7,7 +7,7 @@ package gets its decomposition from :func:`create_decomposition` and never
 names one.
 """
 
-import importlib
+from parmps import registry
 
 DECOMPOSITIONS = {
     "slabs": "parmps.parallel.slabs:SlabDecomposition",
@@ -20,8 +20,7 @@ CHOICES = ("auto",) + tuple(DECOMPOSITIONS)
 
 def decomposition_class(name):
     """The class registered under ``name``."""
-    module, attribute = DECOMPOSITIONS[name].split(":")
-    return getattr(importlib.import_module(module), attribute)
+    return registry.load(DECOMPOSITIONS, name)
 
 
 def create_decomposition(comm, case):
