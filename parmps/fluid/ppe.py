@@ -30,6 +30,7 @@ from parmps.core import kernels
 from parmps.core.lattice import coupling_shells
 from parmps.errors import CaseError, RunFailure
 from parmps.fluid.relaid import RelaidPreconditioner
+from parmps.petsc_options import value_follows
 
 log = logging.getLogger(__name__)
 
@@ -130,13 +131,14 @@ def initialise(command_line_options):
 def split_solver_options(tokens):
     """PETSc command-line tokens as (each solver's options, solver -> name without the
     prefix -> value, for the prefixes of SOLVER_PREFIXES; every other token). A value
-    follows its name unless it starts with a dash."""
+    follows its name unless it names an option itself
+    (:func:`parmps.petsc_options.value_follows`)."""
     solvers, others = {prefix[:-1]: {} for prefix in SOLVER_PREFIXES}, []
     k = 0
     while k < len(tokens):
         name = tokens[k]
         value = None
-        if k + 1 < len(tokens) and not _is_option_name(tokens[k + 1]):
+        if value_follows(tokens, k):
             value = tokens[k + 1]
             k += 1
         k += 1
@@ -146,16 +148,6 @@ def split_solver_options(tokens):
         else:
             others += [name] if value is None else [name, value]
     return solvers, others
-
-
-def _is_option_name(token):
-    if not token.startswith("-"):
-        return False
-    try:
-        float(token)
-        return False
-    except ValueError:
-        return True
 
 
 def gamg_threshold(dimension, re_laplacian):
