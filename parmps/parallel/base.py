@@ -44,6 +44,7 @@ results do not depend on the decomposition or the rank count beyond round-off.
 """
 
 import abc
+import collections
 import logging
 import time
 
@@ -67,6 +68,22 @@ log = logging.getLogger("parmps.parallel")
 FIRST_CUT_TOLERANCE = 1.02
 
 
+Halo = collections.namedtuple("Halo", "reach margin width min_width")
+
+
+def halo_widths(case):
+    """The case's :class:`Halo`: ``reach``, the pair search's radius; ``margin``, how far
+    an owned particle strays out of its region before it migrates
+    (``parallel.migration_margin`` spacings); ``width``, reach + margin, from within which
+    of a region its ghosts come (an owned particle strays up to the margin and sees up to
+    the reach); ``min_width``, reach + 2 margin, the narrowest region whose ghosts all come
+    from the regions beside it."""
+    reach = search_radius(case)
+    margin = float(case["parallel"].get("migration_margin", 0.0)) * float(
+        case["particles"]["spacing"])
+    return Halo(reach, margin, reach + margin, reach + 2.0 * margin)
+
+
 class Decomposition(abc.ABC):
     """Common state (halo widths, load-balance settings, timers) and the shared logic."""
 
@@ -83,17 +100,11 @@ class Decomposition(abc.ABC):
         self.lower, self.upper = self.domain.lower, self.domain.upper
         self.dimension = self.domain.dimension
         parallel = case["parallel"]
-        self.reach = search_radius(case)
-        self.margin = float(parallel.get("migration_margin", 0.0)) * spacing
-        # Owned particles stray up to the margin out of their region, and see up to
-        # the reach: ghosts come from within reach + margin of the region.
-        self.halo_width = self.reach + self.margin
+        self.reach, self.margin, self.halo_width, self.min_width = halo_widths(case)
         self.images = None
         if self.domain.is_periodic:
             self.domain.check_lattice(spacing, case["particles"]["origin"], self.halo_width)
             self.images = PeriodicImages(comm, self.domain, self.halo_width)
-        # Regions at least this wide get their ghosts from adjacent regions only.
-        self.min_width = self.reach + 2.0 * self.margin
         # Balance is by work, not count: each particle weighs its kind's cost.
         self.kind_weight = np.ones(max(KIND_NAMES) + 1)
         self.kind_weight[WALL] = parallel["wall_weight"]
