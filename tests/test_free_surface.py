@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 
 from parmps.core.density import number_density
-from parmps.core.neighbours import pairs_within
-from parmps.fluid.schemes.gradient import correct_gradient, correct_normal_component, pressure_gradient_sum
-from parmps.fluid.schemes.laplacian import SURFACE_ROW
-from parmps.fluid.schemes.surface import surface_fitted_normals, surface_ghost_diagonal, surface_normals
 from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list
+from parmps.core.neighbours import pair_list, pairs_within
+from parmps.fluid.schemes.gradient import (correct_gradient, correct_normal_component,
+                                           pressure_gradient_sum)
+from parmps.fluid.schemes.laplacian import SURFACE_ROW
+from parmps.fluid.schemes.surface import (surface_fitted_normals, surface_ghost_diagonal,
+                                          surface_normals)
 
 RE, RE_LAPLACIAN = 2.3, 3.1
 WIDTH, DEPTH = 40, 12          # fluid particles across and deep, l0 = 1

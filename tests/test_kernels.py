@@ -5,17 +5,19 @@ import pytest
 
 from parmps.core import operators
 from parmps.core.density import number_density
-from parmps.core.neighbours import pairs_within
+from parmps.core.lattice import reference_values
+from parmps.core.neighbours import pair_list, pairs_within, rows_near, rows_of
+from parmps.core.pairs import for_each_dimension
 from parmps.core.symmetric import has_eigenvalue_below, jacobi_diagonalise
 from parmps.fluid.collisions import WALL_GAP_CLOSURE, WALL_NORMAL_REACH, collision_change
 from parmps.fluid.ppe import sort_row_columns
 from parmps.fluid.projection import largest_norm2, lowest_id_not_finite
-from parmps.fluid.schemes.gradient import correct_gradient, correct_normal_component, corrected_pressure_gradient, pressure_gradient_sum
-from parmps.fluid.schemes.laplacian import poisson_rows, poisson_rows_into, poisson_rows_room, rows_in_index_order, variable_density_poisson_rows
+from parmps.fluid.schemes.gradient import (correct_gradient, correct_normal_component,
+                                           corrected_pressure_gradient, pressure_gradient_sum)
+from parmps.fluid.schemes.laplacian import (poisson_rows, poisson_rows_into, poisson_rows_room,
+                                            rows_in_index_order, variable_density_poisson_rows)
 from parmps.fluid.schemes.mixed import divergence_sum
 from parmps.fluid.viscous import vector_laplacian_sum
-from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list, rows_near, rows_of
 
 SPACING = 0.01
 
@@ -547,6 +549,24 @@ def test_kernels_want_two_or_three_components():
     indptr, cols = np.zeros(4, np.int64), np.empty(0, np.int64)
     with pytest.raises(ValueError, match="2 or 3"):
         number_density(indptr, cols, position, 1.0, 3)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_loop_written_once_is_a_kernel_with_the_loops_signature(dimension):
+    """for_each_dimension's kernel takes the loop's arguments but d, with their defaults, by
+    position or by name, and gives what the loop gives for the positions' dimension."""
+    rng = np.random.default_rng(5)
+    position = rng.uniform(0.0, 0.05, (40, dimension))
+    field = rng.normal(size=(40, dimension))
+    indptr, cols = pair_list(position, 0.03)
+    rows = np.arange(40) % 3 != 0
+    whole = vector_laplacian_sum(indptr, cols, position, field, 0.03, 40)
+    some = vector_laplacian_sum(indptr, cols, position, field, 0.03, 40, rows=rows)
+    assert whole.shape == (40, dimension) and np.abs(whole).max() > 0.0
+    assert np.array_equal(some[rows], whole[rows]) and not some[~rows].any()
+    assert vector_laplacian_sum.__doc__.startswith("sum_j (u_j - u_i) w(r_ij)")
+    with pytest.raises(TypeError, match="d first"):
+        for_each_dimension(lambda position, d: d)
 
 
 def test_row_masks_leave_the_other_rows_empty_and_the_rows_kept_unchanged(scene):

@@ -10,12 +10,11 @@ import pytest
 
 from parmps.core import operators
 from parmps.core.density import number_density, rows_beside, smooth_density
-from parmps.core.neighbours import pairs_within
+from parmps.core.lattice import reference_values
+from parmps.core.neighbours import pair_list, pairs_within, rows_of
+from parmps.fluid.schemes import khayyer_gotoh, kondo_koshizuka
 from parmps.fluid.schemes.gradient import correct_gradient, pressure_gradient_sum
 from parmps.fluid.schemes.laplacian import poisson_rows
-from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list, rows_of
-from parmps.fluid.schemes import khayyer_gotoh, kondo_koshizuka
 
 SPACING = 0.01
 SIDE = 25

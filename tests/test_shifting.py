@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from parmps.core.density import smooth_density
-from parmps.fluid.schemes.shifting import concentration_gradient
 from parmps.core.lattice import smooth_reference
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import FLUID, SOLID, WALL
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.schemes import SHIFTINGS, scheme_class
+from parmps.fluid.schemes.shifting import concentration_gradient
 
 SPACING = 0.01
 

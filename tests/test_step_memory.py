@@ -20,9 +20,9 @@ import pytest
 
 from conftest import CASES, NoHalo, OneRank, case_of
 from parmps.core.neighbours import pairs_within
-from parmps.geometry import scene
 from parmps.fluid import projection
 from parmps.fluid.projection import FluidSolver
+from parmps.geometry import scene
 
 
 class _Quiet:

@@ -15,12 +15,11 @@ from mpi4py import MPI
 
 from conftest import case_of, run_parmps, ROOT
 from parmps import open_result
-from parmps.fluid.viscous import no_slip_velocity, vector_laplacian_sum
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.forces import fluid_force_parts
-from parmps.fluid.viscous import ImplicitViscosity
+from parmps.fluid.viscous import ImplicitViscosity, no_slip_velocity, vector_laplacian_sum
 from parmps.geometry import scene
 
 BOX = ROOT / "tests" / "cases" / "viscous_box.toml"
