@@ -197,8 +197,23 @@ class Decomposition(abc.ABC):
         """The owners' values into the neighbouring regions' ghost slots (lengths checked)."""
 
     @abc.abstractmethod
-    def rebalance(self, particles, step):
-        """Move the region boundaries when the load is uneven; returns owned-only."""
+    def _balanced_layout(self, particles):
+        """The region boundaries that balance the owned ``particles``' work (collective; the
+        same on every rank), in the implementation's own form (slabs' edges, blocks' cuts)."""
+
+    @abc.abstractmethod
+    def _refusal(self, layout):
+        """Why ``layout`` cannot be taken (it would make a region thinner than the halo), a
+        phrase for the log, or None."""
+
+    @abc.abstractmethod
+    def _take_layout(self, layout):
+        """Make ``layout`` this decomposition's (before the particles migrate to it); returns
+        what the log's line needs of the old one."""
+
+    @abc.abstractmethod
+    def _layout_change(self, old):
+        """The log's account of the new layout against ``old`` (after the migration)."""
 
     @abc.abstractmethod
     def owner(self, position):
@@ -245,6 +260,44 @@ class Decomposition(abc.ABC):
         particles = self.migrate(particles, eager)
         particles = self.rebalance(particles, step)
         return self.build_halo(particles)
+
+    def rebalance(self, particles, step):
+        """Move the region boundaries when the load is uneven (the triggers of
+        :meth:`_rebalance_reason`), to the layout that balances the work
+        (:meth:`_balanced_layout`), then migrate the particles to it; returns owned-only.
+        A layout that would make a region thinner than the halo is not taken (a warning,
+        repeated at most once per interval) and the run goes on unbalanced. Timed as a
+        migration."""
+        owned = particles.owned() if particles.n_ghost else particles
+        if self.size == 1:
+            return owned
+        return self._timed("migration_seconds", self._rebalance, owned, step)
+
+    def _rebalance(self, particles, step):
+        loads = self.loads(particles)
+        before = imbalance_of(loads)
+        periodic = step % self.rebalance_interval == 0
+        reason = self._rebalance_reason(loads, step)
+        if reason is None:
+            return particles
+        # Logged under the implementation's module, as each logged its own before.
+        logger = logging.getLogger(type(self).__module__)
+        layout = self._balanced_layout(particles)
+        refusal = self._refusal(layout)
+        if refusal is not None:
+            if self.rank == 0 and (periodic or not self._refused):
+                logger.warning("step %d: load imbalance %.3f, but %s", step, before, refusal)
+            self._refused = True
+            return particles
+        self._refused = False
+        old = self._take_layout(layout)
+        result = self._migrate(particles, force=True)
+        after = self.imbalance(result)
+        self._reference = (step, after)
+        self.rebalance_count += 1
+        logger.info("step %d: rebalanced %s (imbalance %.3f, %s) -> %.3f, %s", step, self.name,
+                    before, reason, after, self._layout_change(old))
+        return result
 
     def counts(self, particles):
         """Owned counts of every rank (int64 array, the same on every rank)."""
