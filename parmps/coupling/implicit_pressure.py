@@ -12,7 +12,7 @@ What. The nodes become particles of their own density in the pressure
 equation, ``div (1/rho_i grad P) = source``: a node of mass m_i stands for a
 particle of density rho_i = m_i / l0^d (the fluid force on it is -l0^d grad P,
 so its acceleration is -grad P / rho_i), and pair ij's Laplacian weighs
-(1/rho_i + 1/rho_j)/2 (:func:`parmps.core.kernels.variable_density_poisson_rows`).
+(1/rho_i + 1/rho_j)/2 (:func:`parmps.fluid.schemes.laplacian.variable_density_poisson_rows`).
 The pressure then accounts for how far the nodes give way: the fluid and the
 nodes share one pressure solve, which is the implicit part a light body needs.
 Springs, dashpots, loads and the area constraint stay explicit: after the

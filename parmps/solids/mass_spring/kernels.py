@@ -22,7 +22,7 @@ def network_forces(position, velocity, springs, rest_length, stiffness, damping,
     ``-b (v_i - v_j)``. Any number of components d; in 2D the arithmetic is the
     same, operation for operation, as the 2D kernel this replaced.
     """
-    # d as a literal, so the component loops unroll (as parmps.core.kernels does): a 10k-node
+    # d as a literal, so the component loops unroll (as parmps.core.pairs does): a 10k-node
     # 3D body's spring forces took 1.7 times as long with d read from the array.
     if position.shape[1] == 2:
         _network_forces(position, velocity, springs, rest_length, stiffness, damping,
