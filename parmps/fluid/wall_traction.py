@@ -14,11 +14,15 @@ V = l0^d (:func:`parmps.fluid.forces.fluid_force_parts`, the reaction a body's n
 Summed over the wall's particles it is minus the viscous force the wall put on the fluid: a
 steady periodic channel's walls carry exactly the body force that drives it.
 
-When. After each fluid step, with the ghosts refreshed (the step leaves those of its
-start) and the step's velocities: the fluid's ``u*`` where it took viscosity implicitly
-(the velocities its viscous term saw beside the wall), its new velocities otherwise. The
-sum is reduced over the ranks, so every rank holds every wall's force.
+When. After a fluid step at whose end a probe that reads it samples (every step for a probe
+with interval 0), with the ghosts refreshed (the step leaves those of its start) and the
+step's velocities: the fluid's ``u*`` where it took viscosity implicitly (the velocities its
+viscous term saw beside the wall), its new velocities otherwise; the wall's ``dry``
+particles (walls the step found away from the water) are left out. The sum is reduced over
+the ranks, so every rank holds every wall's force.
 """
+
+import math
 
 import numpy as np
 
@@ -54,22 +58,40 @@ class WallTraction(Participant):
     docstring). ``blocks``: probe name -> the wall's id block (:func:`probed_blocks`);
     ``fluid``: the fluid solver (its constants, gradient and u*)."""
 
-    def __init__(self, blocks, fluid):
+    def __init__(self, blocks, fluid, intervals=(0.0,), end_time=math.inf):
+        """``intervals``: the sampling intervals of the probes that read it [s] (0: every
+        step); ``end_time``: the run's (the probes sample there too)."""
         self.blocks = dict(blocks)
         self.fluid = fluid
+        self.intervals = tuple(intervals)
+        self.end_time = end_time
         dimension = fluid.constants.dimension
         self.forces = {name: np.zeros(dimension) for name in self.blocks}
 
     @classmethod
-    def from_scene(cls, case, particles, origin, sources, fluid):
+    def from_scene(cls, case, particles, origin, sources, fluid, end_time=math.inf):
         """The participant, or None when no force probe reads a wall."""
         blocks = probed_blocks(case, particles.id, origin, sources)
-        return cls(blocks, fluid) if blocks else None
+        if not blocks:
+            return None
+        intervals = [probe["interval"] for probe in case["probe"] if probe["name"] in blocks]
+        return cls(blocks, fluid, intervals, end_time)
+
+    def due(self, time, dt):
+        """Whether a probe may sample at the end of the step [time, time + dt]: a multiple of
+        its interval within the step, widened by a thousandth of the step each side so that
+        round-off never skips a sample (it may compute a step more), or the run's end."""
+        slack = 1e-3 * dt
+        if time + dt >= self.end_time - slack:
+            return True
+        return any(interval <= 0.0 or math.floor((time + dt + slack) / interval)
+                   > math.floor((time - slack) / interval) for interval in self.intervals)
 
     def after_fluid(self, particles, time, dt, decomposition):
-        decomposition.refresh([particles.position, particles.velocity, particles.pressure],
-                              positions=(0,))
-        self.forces = dict(zip(self.blocks, self.viscous_forces(particles)))
+        if self.due(time, dt):
+            decomposition.refresh([particles.position, particles.velocity,
+                                   particles.pressure], positions=(0,))
+            self.forces = dict(zip(self.blocks, self.viscous_forces(particles)))
         return particles
 
     def viscous_forces(self, particles):
@@ -80,7 +102,7 @@ class WallTraction(Participant):
         velocity = self.fluid.viscous_velocity
         local = []
         for low, high in self.blocks.values():
-            rows = np.flatnonzero((ids >= low) & (ids < high))
+            rows = np.flatnonzero((ids >= low) & (ids < high) & (particles.dry[:n] == 0))
             viscous = fluid_force_parts(particles, rows, self.fluid.constants,
                                         self.fluid.gradient, velocity)[1]
             local.append(viscous.sum(axis=0))

@@ -111,7 +111,7 @@ class Simulation:
         # after the fluid step, before an open boundary changes the particle set.
         from parmps.fluid.wall_traction import WallTraction
         self.wall_traction = WallTraction.from_scene(case, global_scene, origin, sources,
-                                                     self.fluid)
+                                                     self.fluid, self.end_time)
         # The order is the order of the hooks within a step.
         participants = [p for p in (moving_walls, self.wall_traction, self.coupling,
                                     open_boundaries) if p is not None]
