@@ -1199,6 +1199,44 @@ def flag_oscillation(path, case, probe="A", start=0.0, reference=None):
     return measured
 
 
+def cylinder_coefficients(path, case, probe="cylinder", front="front", back="back",
+                          start=0.0, end=None, mean_velocity=None, diameter=None,
+                          reference=None):
+    """Schäfer & Turek's steady figures from a force probe on the cylinder and pressure
+    probes at its front and back points, time-averaged over [``start``, ``end``] (the run's
+    end when None): ``drag`` and ``lift`` [N/m], ``cd = 2 F_D / (rho U^2 D)``, ``cl`` alike,
+    ``delta_p = (p_front - p_back) / rho`` [m^2/s^2, the benchmark's Pa per unit density],
+    each with its spread ``<name>_spread``: half the range of its means over the window's
+    quarters (how far the window's mean is settled); with ``reference`` (a table of the same
+    names) each one's relative error as ``<name>_error``. ``mean_velocity`` U and ``diameter``
+    D [m] as the case's inlet and cylinder give them when None."""
+    density = case["fluid"]["density"]
+    if mean_velocity is None:
+        mean_velocity = float(np.linalg.norm(case["inlet"][0]["velocity"]))
+    if diameter is None:
+        diameter = 2.0 * next(w["radius"] for w in case["wall"] if w["name"] == probe)
+    t, force = read_probe(path, probe)
+    end = float(t[-1]) if end is None else end
+    scale = 0.5 * density * mean_velocity ** 2 * diameter
+    series = {"drag": (t, force[:, 0]), "lift": (t, force[:, 1])}
+    t_front, p_front = read_probe(path, front)
+    t_back, p_back = read_probe(path, back)
+    series["delta_p"] = (t_front, (p_front - np.interp(t_front, t_back, p_back)) / density)
+    measured = {"end": end, "window": [start, end]}
+    for name, (time, value) in series.items():
+        edges = np.linspace(start, end, 5)
+        quarters = [window_mean(time, value, a, b) for a, b in zip(edges[:-1], edges[1:])]
+        measured[name] = window_mean(time, value, start, end)
+        measured[f"{name}_spread"] = 0.5 * float(np.ptp(quarters))
+    for name in ("drag", "lift"):
+        coefficient = "cd" if name == "drag" else "cl"
+        measured[coefficient] = measured[name] / scale
+        measured[f"{coefficient}_spread"] = measured[f"{name}_spread"] / scale
+    for name, expected in (reference or {}).items():
+        measured[f"{name}_error"] = measured[name] / expected - 1.0
+    return measured
+
+
 # --------------------------------------------------------------------------
 # A wall of any shape in a violent flow: the wall_crossing check's record
 
