@@ -42,7 +42,7 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.geometry.mesh import determinant_terms, enclosed_volume
+from parmps.geometry.mesh import determinant_terms, enclosed_moments, enclosed_volume
 from parmps.solids.mass_spring.kernels import body_substeps, held_force_substeps, network_forces
 from parmps.solids.mass_spring.statics import highest_frequency, stiffness_matrix
 from parmps.solids.mass_spring.surface import volume_gradient
@@ -330,6 +330,14 @@ class Body:
         if self.rest_volume == 0.0:
             return 0.0
         return (self.volume() - self.rest_volume) / self.rest_volume
+
+    def second_moment(self):
+        """int (x - c)(x - c)^T dV (d, d) of the enclosed region about its centre (zeros for
+        a body without a boundary): the shape a capsule's deformation is read from."""
+        if self.rest_volume == 0.0:
+            d = self.dimension
+            return np.zeros((d, d))
+        return enclosed_moments(self.position[self.surface_nodes], self.surface_facets)[2]
 
     def centroid(self):
         """Centre of mass of the (material) nodes."""
