@@ -497,11 +497,14 @@ def enclosed_volume(position, facets):
 
     Positive when the facets face outward; the area in 2D.
     """
-    return float(_signed_volumes(_corners(position, facets)).sum())
+    # Summed before the division by d!, as before the moments shared it: a lattice's volume
+    # stays exact (tests/test_solid_3d.py).
+    x = _corners(position, facets)
+    return float(_determinants(x).sum()) / math.factorial(x.shape[-1])
 
 
-def _signed_volumes(x):
-    """det[x_a; x_b; ...] / d! of each facet's simplex with the apex, (m,)."""
+def _determinants(x):
+    """det[x_a; x_b; ...] of each facet's simplex with the apex, (m,): d! its volume."""
     d = x.shape[-1]
     determinant = np.zeros(len(x))
     for p, sign in _permutations(d):
@@ -509,7 +512,7 @@ def _signed_volumes(x):
         for r in range(1, d):
             term = term * x[:, r, p[r]]
         determinant += term
-    return determinant / math.factorial(d)
+    return determinant
 
 
 def enclosed_moments(position, facets):
@@ -526,7 +529,7 @@ def enclosed_moments(position, facets):
     if m == 0:
         return 0.0, np.zeros(d), np.zeros((d, d))
     apex = np.asarray(position, dtype=float)[np.asarray(facets)[0, 0]]
-    v = _signed_volumes(x)
+    v = _determinants(x) / math.factorial(d)
     volume = float(v.sum())
     # The simplex's centre is the mean of its d + 1 corners, the apex among them.
     first = (v[:, None] * x.sum(axis=1)).sum(axis=0) / (d + 1)

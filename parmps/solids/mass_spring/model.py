@@ -149,6 +149,9 @@ class MassSpringModel(SolidModel):
         """Each body's Verlet step limit [s], as the substeps were chosen from it."""
         return dict(self.limits)
 
+    def set_drag(self, k, rate, target):
+        self.bodies[k].set_drag(rate, target)
+
     def advance_body(self, k, time, dt):
         body = self.bodies[k]
         count = body.advance(time, dt, self.substeps[body.name])
