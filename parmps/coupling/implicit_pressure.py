@@ -47,8 +47,10 @@ class ImplicitPressureCoupling(WeakCoupling):
     def failure_cause(self, where=None):
         """For a light body: the explicit part of the exchange that still lags.
 
-        The pressure answers a light node's motion, but the body's springs, area constraint
-        and viscous force act on the fluid force held over the step. In the stability map
+        The pressure answers a light node's motion, but the body's springs and area constraint
+        act on the pressure force held over the step (the viscous drag is taken in the
+        substeps since 2026-12-02: box_in_flow at density 0.001 and 1e-4 at 10 U0, which
+        blew up before, then ran to 0.3 s; docs/history.md). In the stability map
         (docs/validation.md) every failure of box_in_flow under this scheme is a body
         lighter than the fluid in a fast flow (0.01 from 5 U0, 0.1 and 0.3 at 10 U0; density
         1 and 10 run at every speed): the fluid force grows by three orders or more within
@@ -61,7 +63,7 @@ class ImplicitPressureCoupling(WeakCoupling):
             return None
         return (f"{light} lighter than the fluid in a fast flow: under coupling.scheme = "
                 f"\"implicit_pressure\" the pressure answers a light body's motion, but its "
-                f"springs, area constraint and viscous force still act on the fluid force held "
+                f"springs and area constraint still act on the pressure force held "
                 f"over the step, and for a light body in a fast flow that lag grows from step "
                 f"to step (the added-mass instability's explicit remainder; docs/validation.md, "
                 f"Stability map). Shorten the step (time.dt_max) or make the body heavier")
