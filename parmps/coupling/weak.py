@@ -12,7 +12,8 @@ but the fluid step does not move them. After each fluid step:
 2. the forces of each body's nodes, spread over the ranks whose slabs hold
    them, are summed on the body's owner (body k belongs to rank k mod size);
 3. the owner advances the body (the solid model's substeps) with the pressure
-   force held and the drag taken implicitly in every substep, and broadcasts the nodes' positions, velocities and fluid forces;
+   force held and the drag taken implicitly in every substep, and broadcasts
+   the nodes' positions, velocities and fluid forces;
 4. every rank writes the new node states into the node particles it owns; the
    decomposition migrates them like any other particle at the next step.
 
