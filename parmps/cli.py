@@ -24,6 +24,7 @@ import traceback
 
 from parmps.errors import INTERRUPTED, CaseError, RunFailure
 from parmps.parallel.mpi import one_blas_thread_per_rank
+from parmps.petsc_options import value_follows
 
 log = logging.getLogger("parmps")
 
@@ -39,23 +40,13 @@ def split_petsc_options(argv):
         token = argv[k]
         if _PETSC_OPTION.match(token):
             petsc.append(token)
-            following = argv[k + 1] if k + 1 < len(argv) else None
-            if following is not None and (not following.startswith("-") or
-                                          _is_number(following)):
-                petsc.append(following)
+            if value_follows(argv, k):
+                petsc.append(argv[k + 1])
                 k += 1
         else:
             ours.append(token)
         k += 1
     return ours, petsc
-
-
-def _is_number(text):
-    try:
-        float(text)
-        return True
-    except ValueError:
-        return False
 
 
 class _Parser(argparse.ArgumentParser):

@@ -213,7 +213,7 @@ def _tank_with_box(depth_cells=20):
 def _brute_force(points, area, normal, position, kind, pressure, radius=2.0):
     """The force of a patch sampled at ``points`` (each standing for ``area``), by plain
     numpy: Shepard averages of the fluid's pressure, dry samples carrying nothing."""
-    from parmps.core.kernels import wendland
+    from parmps.core.pairs import wendland
     r = np.linalg.norm(points[:, None, :] - position[None, :, :], axis=2) / (radius * SPACING)
     w = np.where(r < 1.0, np.vectorize(wendland)(np.minimum(r, 1.0)), 0.0)
     fluid = kind == FLUID

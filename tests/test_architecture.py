@@ -96,6 +96,60 @@ def test_the_walk_sees_a_cycle():
                    for target in graph["parmps.config"])
 
 
+# The repository's folders beside the package: study code (scripts/) and the validations'
+# data and plots (validation/). The package must run without them (an installed parmps has
+# neither); its own validation module is parmps.validation.
+OUTSIDE_THE_PACKAGE = ("scripts", "validation")
+
+
+def imports_from_outside(source):
+    """The absolute imports in ``source`` (statements, and import_module or __import__ of a
+    literal name) whose top-level package is one of OUTSIDE_THE_PACKAGE."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        names = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.level == 0:
+            names = [node.module or ""]
+        elif (isinstance(node, ast.Call) and node.args
+              and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)
+              and getattr(node.func, "attr", getattr(node.func, "id", None))
+              in ("import_module", "__import__")):
+            names = [node.args[0].value]
+        found += [name for name in names if name.split(".")[0] in OUTSIDE_THE_PACKAGE]
+    return found
+
+
+def test_no_module_of_the_package_imports_scripts_or_validation():
+    offenders = []
+    for name in sorted(set(_modules()) | {"parmps"}):
+        path = PACKAGE.joinpath(*name.split(".")[1:])
+        path = path / "__init__.py" if path.is_dir() else path.with_suffix(".py")
+        offenders += [f"{name}: {target}" for target in imports_from_outside(path.read_text())]
+    assert not offenders, offenders
+    # The check sees each form (and leaves the package's own validation module alone).
+    assert imports_from_outside("import scripts.study\nfrom validation.dam_break import plot\n"
+                                "importlib.import_module('scripts.bench')\n"
+                                "from parmps.validation import launch\nfrom . import validation\n"
+                                ) == ["scripts.study", "validation.dam_break", "scripts.bench"]
+
+
+def test_the_command_line_and_the_solvers_pair_options_and_values_alike():
+    """One tokeniser: a value follows its option's name unless it names an option itself (a
+    negative number does not)."""
+    from parmps.cli import split_petsc_options
+    from parmps.fluid.ppe import split_solver_options
+    ours, petsc = split_petsc_options(["case.toml", "-pressure_ksp_rtol", "1e-9", "-log_view",
+                                       "--end-time", "0.1", "-viscous_ksp_atol", "-1e-3",
+                                       "-pressure_ksp_monitor"])
+    assert ours == ["case.toml", "--end-time", "0.1"]
+    solvers, others = split_solver_options(petsc)
+    assert solvers == {"pressure": {"ksp_rtol": "1e-9", "ksp_monitor": None},
+                       "viscous": {"ksp_atol": "-1e-3"}}
+    assert others == ["-log_view"]
+
+
 def test_every_module_imports_without_side_effects():
     for name in _modules():
         if not name.endswith("__main__"):

@@ -4,9 +4,14 @@ that is zero half a spacing above the top row; the Dirichlet one reads the surfa
 import numpy as np
 import pytest
 
-from parmps.core import kernels
+from parmps.core.density import number_density
 from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list
+from parmps.core.neighbours import pair_list, pairs_within
+from parmps.fluid.schemes.gradient import (correct_gradient, correct_normal_component,
+                                           pressure_gradient_sum)
+from parmps.fluid.schemes.laplacian import SURFACE_ROW
+from parmps.fluid.schemes.surface import (surface_fitted_normals, surface_ghost_diagonal,
+                                          surface_normals)
 
 RE, RE_LAPLACIAN = 2.3, 3.1
 WIDTH, DEPTH = 40, 12          # fluid particles across and deep, l0 = 1
@@ -31,9 +36,9 @@ def layer():
     n = len(position)
     indptr, cols = pair_list(position, RE_LAPLACIAN + 0.01, n_rows=n)
     n0, _ = reference_values(1.0, RE, 2)
-    number_density, _ = kernels.number_density(indptr, cols, position, RE, n)
+    density, _ = number_density(indptr, cols, position, RE, n)
     has_pressure = kind != DUMMY
-    surface = (number_density < 0.97 * n0) & has_pressure
+    surface = (density < 0.97 * n0) & has_pressure
     pressure = np.where(has_pressure, DEPTH - position[:, 1], 0.0)
     # Away from the layer's open ends and from the floor: where the lattice is cut by the
     # surface only.
@@ -44,12 +49,12 @@ def layer():
 
 
 def _ghost_diagonal(s, undirected=0.0):
-    raw = kernels.surface_normals(s["indptr"], s["cols"], s["position"], s["surface"],
-                                  RE_LAPLACIAN, s["n"])
-    normal = kernels.surface_fitted_normals(s["indptr"], s["cols"], s["position"], raw,
-                                            s["surface"] & (s["kind"] == FLUID), RE_LAPLACIAN,
-                                            s["n"])
-    return normal, kernels.surface_ghost_diagonal(
+    raw = surface_normals(s["indptr"], s["cols"], s["position"], s["surface"],
+                          RE_LAPLACIAN, s["n"])
+    normal = surface_fitted_normals(s["indptr"], s["cols"], s["position"], raw,
+                                    s["surface"] & (s["kind"] == FLUID), RE_LAPLACIAN,
+                                    s["n"])
+    return normal, surface_ghost_diagonal(
         s["indptr"], s["cols"], s["position"], RE_LAPLACIAN, s["has_pressure"], s["surface"],
         s["surface"] & (s["kind"] == FLUID), normal, False, 0.5, undirected, s["n"])
 
@@ -122,17 +127,17 @@ def test_a_particle_taken_for_surface_below_the_top_row_keeps_the_level_above_it
 
 def test_the_corrected_gradient_is_exact_on_the_surface_below_the_limit_and_half_above(layer):
     s = layer
-    near_indptr, near_cols = kernels.pairs_within(s["indptr"], s["cols"], s["position"], RE,
-                                                  s["n"])
+    near_indptr, near_cols = pairs_within(s["indptr"], s["cols"], s["position"], RE,
+                                          s["n"])
     rows = s["kind"] == FLUID
-    plain = (2 / s["n0"]) * kernels.pressure_gradient_sum(
+    plain = (2 / s["n0"]) * pressure_gradient_sum(
         near_indptr, near_cols, s["position"], s["pressure"], s["has_pressure"], RE, s["n"], rows)
     top = s["middle"] & (s["position"][:, 1] > DEPTH - 1)
     deep = s["middle"] & (s["position"][:, 1] < DEPTH - 2)
     for limit, on_surface in ((0.45, -1.0), (0.7, -0.5)):
         gradient = plain.copy()
-        kernels.correct_gradient(near_indptr, near_cols, s["position"], s["has_pressure"], RE,
-                                 2 / s["n0"], gradient, limit, rows)
+        correct_gradient(near_indptr, near_cols, s["position"], s["has_pressure"], RE,
+                         2 / s["n0"], gradient, limit, rows)
         np.testing.assert_allclose(gradient[top], np.tile([0.0, on_surface], (top.sum(), 1)),
                                    atol=1e-3 if limit > 0.5 else 1e-12)
         np.testing.assert_allclose(gradient[deep], np.tile([0.0, -1.0], (deep.sum(), 1)),
@@ -156,8 +161,8 @@ def test_a_row_beside_a_line_of_surface_particles_takes_the_missing_side_across_
         on_surface = np.array([False] + [True] * 5)
         raw = np.zeros((n, 3))
         raw[0] = missing / np.linalg.norm(missing)
-        normal = kernels.surface_fitted_normals(indptr, cols, position, raw, on_surface,
-                                                RE_LAPLACIAN, 1)
+        normal = surface_fitted_normals(indptr, cols, position, raw, on_surface,
+                                        RE_LAPLACIAN, 1)
         np.testing.assert_allclose(normal[0], expected, atol=1e-12)
     # Off the line (the row below a plane of them), one direction of least spread: the plane's.
     plane = np.array([[0.0, 0.0, 0.0]] + [[x, y, 1.0] for x in (-1.0, 0.0, 1.0)
@@ -165,8 +170,8 @@ def test_a_row_beside_a_line_of_surface_particles_takes_the_missing_side_across_
     indptr, cols = pair_list(plane, RE_LAPLACIAN + 0.01, n_rows=len(plane))
     raw = np.zeros((len(plane), 3))
     raw[0] = missing / np.linalg.norm(missing)
-    normal = kernels.surface_fitted_normals(indptr, cols, plane, raw,
-                                            np.arange(len(plane)) > 0, RE_LAPLACIAN, 1)
+    normal = surface_fitted_normals(indptr, cols, plane, raw,
+                                    np.arange(len(plane)) > 0, RE_LAPLACIAN, 1)
     np.testing.assert_allclose(normal[0], [0.0, 0.0, 1.0], atol=1e-12)
 
 
@@ -178,10 +183,10 @@ def test_a_surface_row_without_a_direction_gets_the_undirected_diagonal():
     n = len(position)
     indptr, cols = pair_list(position, RE_LAPLACIAN + 0.01, n_rows=n)
     surface = np.ones(n, bool)
-    raw = kernels.surface_normals(indptr, cols, position, surface, RE_LAPLACIAN, n)
-    normal = kernels.surface_fitted_normals(indptr, cols, position, raw, surface, RE_LAPLACIAN, n)
-    diagonal = kernels.surface_ghost_diagonal(indptr, cols, position, RE_LAPLACIAN, surface,
-                                              surface, surface, normal, False, 0.5, 7.0, n)
+    raw = surface_normals(indptr, cols, position, surface, RE_LAPLACIAN, n)
+    normal = surface_fitted_normals(indptr, cols, position, raw, surface, RE_LAPLACIAN, n)
+    diagonal = surface_ghost_diagonal(indptr, cols, position, RE_LAPLACIAN, surface,
+                                      surface, surface, normal, False, 0.5, 7.0, n)
     assert diagonal[0] == 7.0 and diagonal[5] == 7.0
     assert (diagonal > 0.0).all()
 
@@ -201,10 +206,10 @@ def test_the_extrapolated_condition_corrects_the_fluids_surface_and_nothing_else
     laplacian = SimpleNamespace(coefficient=1.0, inverse_cube=False, dirichlet_diagonal=7.0)
     constants = SimpleNamespace(dimension=2, n0=s["n0"], re_number_density=RE,
                                 re_laplacian=RE_LAPLACIAN, spacing=1.0)
-    near_indptr, near_cols = kernels.pairs_within(s["indptr"], s["cols"], s["position"], RE,
-                                                  s["n"])
+    near_indptr, near_cols = pairs_within(s["indptr"], s["cols"], s["position"], RE,
+                                          s["n"])
     top = s["middle"] & (s["position"][:, 1] > DEPTH - 1)
-    is_unknown = np.where(s["surface"], kernels.SURFACE_ROW, s["has_pressure"]).astype(np.int8)
+    is_unknown = np.where(s["surface"], SURFACE_ROW, s["has_pressure"]).astype(np.int8)
     # Half the top row stands in for a body's face: not the fluid, so not its surface.
     body_face = top & (s["position"][:, 0] < WIDTH / 2)
     fluid = (s["kind"] == FLUID) & ~body_face
@@ -248,16 +253,16 @@ def test_the_normal_correction_scales_the_normal_part_and_never_turns_the_rest()
     pressure = 3.0 * position[:, 0] + 0.2 * position[:, 1] + 10.0
     rows = np.zeros(n, bool)
     rows[0] = True
-    plain = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
-                                                     has_pressure, RE, n, rows)
+    plain = (2 / n0) * pressure_gradient_sum(indptr, cols, position, pressure,
+                                             has_pressure, RE, n, rows)
     normal = np.zeros((n, 2))
     normal[0] = [0.6, 0.8]
     along = (2 / n0) * sum((RE / np.hypot(*r) - 1.0) * (r @ normal[0]) ** 2 / (r @ r)
                            for r in position[1:] - position[0] if 0 < np.hypot(*r) < RE)
     assert 0.0 < along < 1.0
     scaled = plain.copy()
-    count = kernels.correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
-                                             scaled, normal, 0.0, rows)
+    count = correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
+                                     scaled, normal, 0.0, rows)
     assert count == 1
     tangent = np.array([-0.8, 0.6])
     np.testing.assert_allclose(scaled[0] @ tangent, plain[0] @ tangent, rtol=1e-12)
@@ -265,6 +270,6 @@ def test_the_normal_correction_scales_the_normal_part_and_never_turns_the_rest()
     np.testing.assert_array_equal(scaled[1:], plain[1:])
     # Below the limit it is left alone.
     kept = plain.copy()
-    assert kernels.correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
-                                            kept, normal, along + 1e-9, rows) == 0
+    assert correct_normal_component(indptr, cols, position, has_pressure, RE, 2 / n0,
+                                    kept, normal, along + 1e-9, rows) == 0
     np.testing.assert_array_equal(kept, plain)

@@ -3,9 +3,21 @@
 import numpy as np
 import pytest
 
-from parmps.core import kernels, operators
+from parmps.core import operators
+from parmps.core.density import number_density
 from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list, rows_near, rows_of
+from parmps.core.neighbours import pair_list, pairs_within, rows_near, rows_of
+from parmps.core.pairs import for_each_dimension
+from parmps.core.symmetric import has_eigenvalue_below, jacobi_diagonalise
+from parmps.fluid.collisions import WALL_GAP_CLOSURE, WALL_NORMAL_REACH, collision_change
+from parmps.fluid.ppe import sort_row_columns
+from parmps.fluid.projection import largest_norm2, lowest_id_not_finite
+from parmps.fluid.schemes.gradient import (correct_gradient, correct_normal_component,
+                                           corrected_pressure_gradient, pressure_gradient_sum)
+from parmps.fluid.schemes.laplacian import (poisson_rows, poisson_rows_into, poisson_rows_room,
+                                            rows_in_index_order, variable_density_poisson_rows)
+from parmps.fluid.schemes.mixed import divergence_sum
+from parmps.fluid.viscous import vector_laplacian_sum
 
 SPACING = 0.01
 
@@ -33,7 +45,7 @@ def scene(request):
 def test_number_density(scene):
     position, _, _, _, n, indptr, cols, pairs = scene
     radius = 2.1 * SPACING
-    density, count = kernels.number_density(indptr, cols, position, radius, n)
+    density, count = number_density(indptr, cols, position, radius, n)
     np.testing.assert_allclose(density, operators.number_density(pairs, pairs.weight(radius), n),
                                rtol=1e-12)
     assert np.array_equal(count, np.bincount(pairs.rows, weights=pairs.weight(radius) > 0,
@@ -46,14 +58,14 @@ def test_laplacian_and_divergence(scene):
     d = position.shape[1]
     n0, lambda0 = reference_values(SPACING, radius, d)
     expected = operators.laplacian(pairs, pairs.weight(radius), velocity, n, n0, lambda0)
-    got = 2 * d / (lambda0 * n0) * kernels.vector_laplacian_sum(
+    got = 2 * d / (lambda0 * n0) * vector_laplacian_sum(
         indptr, cols, position, velocity, radius, n)
     assert got.shape == (n, d)
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-8)
     radius = 2.1 * SPACING
     n0, _ = reference_values(SPACING, radius, d)
     expected = operators.divergence(pairs, pairs.weight(radius), velocity, n, n0)
-    got = d / n0 * kernels.divergence_sum(indptr, cols, position, velocity, radius, n)
+    got = d / n0 * divergence_sum(indptr, cols, position, velocity, radius, n)
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-8)
 
 
@@ -66,7 +78,7 @@ def test_pressure_gradient(scene):
     include = ~is_dummy
     minimum = operators.neighbourhood_minimum(pairs, w, pressure, n, include)
     expected = operators.gradient(pairs, w, pressure, n, n0, minimum, include)
-    got = d / n0 * kernels.pressure_gradient_sum(
+    got = d / n0 * pressure_gradient_sum(
         indptr, cols, position, pressure, include, radius, n)
     np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-6)
 
@@ -85,8 +97,8 @@ def test_corrected_gradient_is_exact_for_a_linear_field(scene):
     gradient = operators.gradient(pairs, pairs.weight(radius), pressure, n, n0,
                                   pressure[:n], include)
     plain = gradient.copy()
-    corrected = kernels.correct_gradient(indptr, cols, position, include, radius,
-                                         d / n0, gradient, 0.7)
+    corrected = correct_gradient(indptr, cols, position, include, radius,
+                                 d / n0, gradient, 0.7)
     # Interior rows (a full neighbourhood of pressure-carrying particles: 3 l0
     # from every side of the lattice, 3 l0 above the dummies) are corrected and
     # exact; the jittered lattice leaves the plain sums off by a few percent.
@@ -109,8 +121,8 @@ def test_collisions_conserve_momentum_between_moving_particles(scene):
     squeezed = position * 0.6
     full_indptr, full_cols = pair_list(squeezed, 3.7 * SPACING)
     moving = np.ones(len(position), bool)
-    change = kernels.collision_change(full_indptr, full_cols, squeezed, velocity, moving,
-                                      0.5 * SPACING, 0.2, len(position), squeezed)
+    change = collision_change(full_indptr, full_cols, squeezed, velocity, moving,
+                              0.5 * SPACING, 0.2, len(position), squeezed)
     assert np.abs(change).max() > 0
     assert change.shape == position.shape
     np.testing.assert_allclose(change.sum(axis=0), 0.0, atol=1e-12)
@@ -141,16 +153,16 @@ def test_poisson_rows_match_reference_and_are_symmetric(scene):
     n = len(position)
     indptr, cols = pair_list(position, 3.7 * SPACING)
     pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
-    density, _ = kernels.number_density(indptr, cols, position, 2.1 * SPACING, n)
+    density, _ = number_density(indptr, cols, position, 2.1 * SPACING, n)
     n0, _ = reference_values(SPACING, 2.1 * SPACING, position.shape[1])
     unknown = ~is_dummy & (density >= 0.97 * n0)
     row_number = np.full(n, -1, np.int64)
     row_number[~is_dummy] = np.arange(int((~is_dummy).sum()))
     unknown_row = np.full(n, -1, np.int64)
     unknown_row[unknown] = row_number[unknown]
-    row_ptr, columns, values = kernels.poisson_rows(indptr, cols, position, radius, row_number,
-                                                    unknown.astype(np.int8), 860.0, 0.45, 7.0,
-                                                    False)
+    row_ptr, columns, values = poisson_rows(indptr, cols, position, radius, row_number,
+                                            unknown.astype(np.int8), 860.0, 0.45, 7.0,
+                                            False)
     expected = reference_rows(pairs.rows, cols, pairs.weight(radius), unknown, unknown_row,
                               is_dummy, 860.0, 0.45)
     for i in np.flatnonzero(~is_dummy & ~unknown):
@@ -184,15 +196,15 @@ def test_poisson_rows_fill_a_room_of_the_solvers_integer_type_or_say_it_is_short
     unknown = (~is_dummy).astype(np.int8)
     unknown[::7] = 0
     arguments = (indptr, cols, position, radius, row_number, unknown, 860.0, 0.45, 7.0, False)
-    row_ptr, columns, values = kernels.poisson_rows(*arguments)
+    row_ptr, columns, values = poisson_rows(*arguments)
     entries = len(columns)
-    room, other_room = kernels.poisson_rows_room(indptr, cols, row_number)
+    room, other_room = poisson_rows_room(indptr, cols, row_number)
     assert entries < room and other_room == 0
     for room, written in ((entries, entries), (entries - 1, -1)):
         into_columns, into_values = np.empty(room, np.int32), np.empty(room)
-        into_ptr, _, _, got, other = kernels.poisson_rows_into(
+        into_ptr, _, _, got, other = poisson_rows_into(
             *arguments, np.ones(n), into_columns, into_values, into_columns[:0],
-            into_values[:0], kernels.rows_in_index_order(row_number, len(indptr) - 1))
+            into_values[:0], rows_in_index_order(row_number, len(indptr) - 1))
         assert got == written
         if got == entries:
             assert other == 0
@@ -243,13 +255,13 @@ def test_poisson_rows_split_into_this_ranks_columns_and_the_others(dimension):
                  False, np.ones(n))
     whole_room = indptr[-1] + n_owned
     whole_columns, whole_values = np.empty(whole_room, np.int64), np.empty(whole_room)
-    whole_ptr, _, _, entries, _ = kernels.poisson_rows_into(
+    whole_ptr, _, _, entries, _ = poisson_rows_into(
         *arguments, whole_columns, whole_values, whole_columns[:0], whole_values[:0], rows,
         False)
-    room, other_room = kernels.poisson_rows_room(indptr, cols, row_number)
+    room, other_room = poisson_rows_room(indptr, cols, row_number)
     columns, values = np.empty(room, np.int32), np.empty(room)
     other_columns, other_values = np.empty(other_room, np.int32), np.empty(other_room)
-    row_ptr, other_ptr, diagonal_at, owned_entries, other_entries = kernels.poisson_rows_into(
+    row_ptr, other_ptr, diagonal_at, owned_entries, other_entries = poisson_rows_into(
         *arguments, columns, values, other_columns, other_values, rows)
     assert other_entries > 0 and owned_entries + other_entries == entries
     np.testing.assert_array_equal(columns[diagonal_at], np.arange(n_owned))
@@ -264,9 +276,9 @@ def test_poisson_rows_split_into_this_ranks_columns_and_the_others(dimension):
         keep, keep_whole = np.argsort(joined), np.argsort(whole_columns[whole])
         np.testing.assert_array_equal(joined[keep], whole_columns[whole][keep_whole])
         np.testing.assert_array_equal(joined_values[keep], whole_values[whole][keep_whole])
-    short = kernels.poisson_rows_into(*arguments, columns, values,
-                                      other_columns[:other_entries - 1],
-                                      other_values[:other_entries - 1], rows)
+    short = poisson_rows_into(*arguments, columns, values,
+                              other_columns[:other_entries - 1],
+                              other_values[:other_entries - 1], rows)
     assert short[3] == -1
     laplacian = StandardLaplacian({}, SimpleNamespace(
         laplacian_coefficient=860.0, n0_laplacian=7.0 / 860.0, re_laplacian=3.1 * SPACING))
@@ -290,14 +302,14 @@ def test_variable_density_rows_weigh_each_pair_by_the_mean_inverse_density(scene
     unknown = ~is_dummy
     arguments = (indptr, cols, position, radius, row_number, unknown.astype(np.int8), 860.0,
                  0.45, 7.0, False)
-    plain = kernels.poisson_rows(*arguments)
-    uniform = kernels.variable_density_poisson_rows(*arguments, np.ones(n))
+    plain = poisson_rows(*arguments)
+    uniform = variable_density_poisson_rows(*arguments, np.ones(n))
     for a, b in zip(plain, uniform):
         np.testing.assert_array_equal(a, b)
     centre = position.mean(axis=0)
     mobility = np.where(np.abs(position - centre).max(axis=1) < 2.5 * SPACING, 10.0, 1.0)
     assert 1 < np.count_nonzero(mobility > 1) < n // 2
-    row_ptr, columns, values = kernels.variable_density_poisson_rows(*arguments, mobility)
+    row_ptr, columns, values = variable_density_poisson_rows(*arguments, mobility)
     unknown_row = np.where(unknown, row_number, -1)
     expected = reference_rows(pairs.rows, cols, pairs.weight(radius), unknown, unknown_row,
                               is_dummy, 860.0, 0.45, mobility)
@@ -325,7 +337,7 @@ def reference_collisions(position, velocity, moving, limit, restitution, n_rows,
     within their reach (sqrt(d - 1 + 1/4) times the limit) as one wall along the normal
     of every fixed partner within twice that reach at ``start``, weighted (1 - r/R)^2."""
     out = np.zeros((n_rows, position.shape[1]))
-    fixed_reach = limit * np.sqrt(position.shape[1] - 1 + kernels.WALL_GAP_CLOSURE ** 2)
+    fixed_reach = limit * np.sqrt(position.shape[1] - 1 + WALL_GAP_CLOSURE ** 2)
     reach = np.where(moving, limit, fixed_reach)
     for i in np.flatnonzero(moving[:n_rows]):
         offset = position - position[i]
@@ -341,7 +353,7 @@ def reference_collisions(position, velocity, moving, limit, restitution, n_rows,
             weight = 1.0 - r[wall] / fixed_reach
             offset_start = start - start[i]
             r_start = np.linalg.norm(offset_start, axis=1)
-            support = kernels.WALL_NORMAL_REACH * fixed_reach
+            support = WALL_NORMAL_REACH * fixed_reach
             around = ~moving & (r_start > 0) & (r_start < support)
             contact = (((1.0 - r_start[around] / support) ** 2 / r_start[around])[:, None]
                        * offset_start[around]).sum(axis=0)
@@ -364,8 +376,8 @@ def test_collisions_match_pairwise_reference(scene):
     # directions there differ from those at the predicted positions.
     start = squeezed - 0.05 * velocity
     for begin in (squeezed, start):
-        change = kernels.collision_change(indptr, cols, squeezed, velocity, moving,
-                                          0.5 * SPACING, 0.2, n, begin)
+        change = collision_change(indptr, cols, squeezed, velocity, moving,
+                                  0.5 * SPACING, 0.2, n, begin)
         expected = reference_collisions(squeezed, velocity, moving, 0.5 * SPACING, 0.2, n,
                                         begin)
         assert np.count_nonzero(np.any(expected != 0, axis=1)) > 10
@@ -394,14 +406,14 @@ def test_a_fast_droplet_aimed_at_a_walls_gap_is_turned_back(dimension):
     position[0] += dt * velocity[0]
     moving = np.r_[True, np.zeros(len(wall), bool)]
     indptr, cols = pair_list(position, 1.5, n_rows=1)
-    change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
-                                      start)
+    change = collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                              start)
     after = velocity[0] + change[0]
     assert after[0] > 0.1 * speed
     assert position[0, 0] + dt * change[0, 0] > 0.0
     # At the predicted positions alone the normal lies nearly in the plane.
-    static = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
-                                      position)
+    static = collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                              position)
     assert velocity[0, 0] + static[0, 0] < 0.0
 
 
@@ -429,8 +441,8 @@ def test_a_droplet_resting_on_a_wall_does_not_sink_down_its_gaps(dimension):
         velocity[0, -1] -= dt * gravity
         position[0] += dt * velocity[0]
         indptr, cols = pair_list(position, 1.5, n_rows=1)
-        change = kernels.collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
-                                          start)
+        change = collision_change(indptr, cols, position, velocity, moving, 0.5, 0.2, 1,
+                                  start)
         velocity[0] += change[0]
         position[0] += dt * change[0]
         lowest = min(lowest, position[0, -1])
@@ -442,7 +454,7 @@ def test_a_droplet_resting_on_a_wall_does_not_sink_down_its_gaps(dimension):
 
 @pytest.mark.parametrize("dimension", [2, 3])
 def test_jacobi_rotations_find_the_smallest_eigenvalue(dimension):
-    """kernels._jacobi_diagonalise (the 3D surface normal's) leaves the eigenvalues on the
+    """jacobi_diagonalise (the 3D surface normal's) leaves the eigenvalues on the
     diagonal: the smallest of them against numpy's."""
     rng = np.random.default_rng(3)
     # Diagonal, the identity, rank one, a double eigenvalue with a small
@@ -457,7 +469,7 @@ def test_jacobi_rotations_find_the_smallest_eigenvalue(dimension):
     for a in matrices:
         expected = np.linalg.eigvalsh(a)[0]
         work[:] = a
-        kernels._jacobi_diagonalise(work, work, False)
+        jacobi_diagonalise(work, work, False)
         got = np.diagonal(work).min()
         assert got == pytest.approx(expected, abs=1e-13 * np.abs(a).max())
 
@@ -485,12 +497,12 @@ def test_an_eigenvalue_below_a_limit_is_told_by_the_pivots(dimension):
         a = np.ascontiguousarray((a + a.T) / 2)
         if abs(smallest - limit) < 1e-12 and smallest != limit:
             continue
-        assert kernels._has_eigenvalue_below(a, limit, work) == (smallest < limit), (a, smallest)
+        assert has_eigenvalue_below(a, limit, work) == (smallest < limit), (a, smallest)
 
 
 @pytest.mark.parametrize("dimension", [2, 3])
 def test_the_corrected_gradient_in_one_pass_is_the_three_kernels_in_turn(dimension):
-    """kernels.corrected_pressure_gradient against the gradient's sum scaled, the correction
+    """corrected_pressure_gradient against the gradient's sum scaled, the correction
     along the normal on the surface rows and the full correction on the others, bit for bit:
     a jittered lattice with a ragged top (rows corrected and left alone), a row mask, surface
     rows with and without a normal, and dummies that carry no pressure."""
@@ -510,22 +522,22 @@ def test_the_corrected_gradient_in_one_pass_is_the_three_kernels_in_turn(dimensi
     normal = rng.standard_normal((n, dimension))
     normal[rng.random(n) < 0.1] = 0.0
     # d/n0 with n0 the full lattice's number density: A_i near the identity inside.
-    n0 = np.percentile(kernels.number_density(indptr, cols, position, radius, n)[0], 90)
+    n0 = np.percentile(number_density(indptr, cols, position, radius, n)[0], 90)
     scale, limit, surface_limit = dimension / n0, 0.7, 0.3
     for surface in (False, True):
-        expected = scale * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
-                                                         has_pressure, radius, n, rows)
+        expected = scale * pressure_gradient_sum(indptr, cols, position, pressure,
+                                                 has_pressure, radius, n, rows)
         every = rows
         if surface:
             every = rows & ~surface_rows
-            along = kernels.correct_normal_component(indptr, cols, position, has_pressure,
-                                                     radius, scale, expected, normal,
-                                                     surface_limit, surface_rows)
+            along = correct_normal_component(indptr, cols, position, has_pressure,
+                                             radius, scale, expected, normal,
+                                             surface_limit, surface_rows)
             assert 0 < along < np.count_nonzero(surface_rows)
-        counted = kernels.correct_gradient(indptr, cols, position, has_pressure, radius, scale,
-                                           expected, limit, every)
+        counted = correct_gradient(indptr, cols, position, has_pressure, radius, scale,
+                                   expected, limit, every)
         assert 0 < counted < np.count_nonzero(every)
-        got = kernels.corrected_pressure_gradient(
+        got = corrected_pressure_gradient(
             indptr, cols, position, pressure, has_pressure, radius, scale, n, limit, rows,
             surface_rows if surface else None, normal if surface else None, surface_limit)
         np.testing.assert_array_equal(got, expected)
@@ -536,7 +548,25 @@ def test_kernels_want_two_or_three_components():
     position = np.zeros((3, 4))
     indptr, cols = np.zeros(4, np.int64), np.empty(0, np.int64)
     with pytest.raises(ValueError, match="2 or 3"):
-        kernels.number_density(indptr, cols, position, 1.0, 3)
+        number_density(indptr, cols, position, 1.0, 3)
+
+
+@pytest.mark.parametrize("dimension", [2, 3])
+def test_a_loop_written_once_is_a_kernel_with_the_loops_signature(dimension):
+    """for_each_dimension's kernel takes the loop's arguments but d, with their defaults, by
+    position or by name, and gives what the loop gives for the positions' dimension."""
+    rng = np.random.default_rng(5)
+    position = rng.uniform(0.0, 0.05, (40, dimension))
+    field = rng.normal(size=(40, dimension))
+    indptr, cols = pair_list(position, 0.03)
+    rows = np.arange(40) % 3 != 0
+    whole = vector_laplacian_sum(indptr, cols, position, field, 0.03, 40)
+    some = vector_laplacian_sum(indptr, cols, position, field, 0.03, 40, rows=rows)
+    assert whole.shape == (40, dimension) and np.abs(whole).max() > 0.0
+    assert np.array_equal(some[rows], whole[rows]) and not some[~rows].any()
+    assert vector_laplacian_sum.__doc__.startswith("sum_j (u_j - u_i) w(r_ij)")
+    with pytest.raises(TypeError, match="d first"):
+        for_each_dimension(lambda position, d: d)
 
 
 def test_row_masks_leave_the_other_rows_empty_and_the_rows_kept_unchanged(scene):
@@ -552,21 +582,21 @@ def test_row_masks_leave_the_other_rows_empty_and_the_rows_kept_unchanged(scene)
         [cols[indptr[i]:indptr[i + 1]] for i in np.flatnonzero(keep)]))
     moving = keep & (position[:n, 0] > 5 * SPACING)
     radius = 3.1 * SPACING
-    full = kernels.vector_laplacian_sum(indptr, cols, position, velocity, radius, n)
-    some = kernels.vector_laplacian_sum(indptr, cols, position, velocity, radius, n, moving)
+    full = vector_laplacian_sum(indptr, cols, position, velocity, radius, n)
+    some = vector_laplacian_sum(indptr, cols, position, velocity, radius, n, moving)
     np.testing.assert_array_equal(some[moving], full[moving])
     assert np.all(some[~moving] == 0.0)
     include = ~is_dummy
     radius = 2.1 * SPACING
-    full = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
-    some = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n,
-                                         moving)
+    full = pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
+    some = pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n,
+                                 moving)
     np.testing.assert_array_equal(some[moving], full[moving])
     assert np.all(some[~moving] == 0.0)
     corrected_full, corrected_some = full.copy(), some.copy()
-    kernels.correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_full, 0.7)
-    kernels.correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_some, 0.7,
-                             moving)
+    correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_full, 0.7)
+    correct_gradient(indptr, cols, position, include, radius, 0.5, corrected_some, 0.7,
+                     moving)
     np.testing.assert_array_equal(corrected_some[moving], corrected_full[moving])
 
 
@@ -585,9 +615,9 @@ def test_rows_numbered_in_the_searchs_cell_order_come_out_ascending(scene):
     unknown[::7] = 0
     arguments = (indptr, cols, position, 3.1 * SPACING, row_number, unknown, 860.0, 0.45, 7.0,
                  False, np.ones(n))
-    room, _ = kernels.poisson_rows_room(indptr, cols, row_number)
+    room, _ = poisson_rows_room(indptr, cols, row_number)
     columns, values = np.empty(room, np.int64), np.empty(room)
-    row_ptr, _, diagonal_at, entries, _ = kernels.poisson_rows_into(
+    row_ptr, _, diagonal_at, entries, _ = poisson_rows_into(
         *arguments, columns, values, columns[:0], values[:0], rows)
     columns, values = columns[:entries], values[:entries]
     np.testing.assert_array_equal(columns[diagonal_at], np.arange(len(rows)))
@@ -595,9 +625,9 @@ def test_rows_numbered_in_the_searchs_cell_order_come_out_ascending(scene):
         assert np.all(np.diff(columns[row_ptr[r]:row_ptr[r + 1]]) > 0)
     by_index = np.full(n, -1, np.int64)
     by_index[~is_dummy] = np.arange(len(rows))
-    index_ptr, index_columns, index_values = kernels.poisson_rows(
+    index_ptr, index_columns, index_values = poisson_rows(
         indptr, cols, position, 3.1 * SPACING, by_index, unknown, 860.0, 0.45, 7.0, False)
-    kernels.sort_row_columns(index_ptr, index_columns, index_values)
+    sort_row_columns(index_ptr, index_columns, index_values)
     # Row r of the cell-ordered matrix is particle rows[r], whose index-ordered row is
     # by_index[rows[r]]; its columns map the same way.
     to_index = by_index[rows]
@@ -621,7 +651,7 @@ def test_sort_row_columns_sorts_rows_nearly_ascending_or_leaves_ascending_ones()
     columns = np.concatenate([ascending, one_out, swapped]).astype(np.int32)
     row_ptr = np.array([0, 100, 200, 300], np.int32)
     values = columns * 10.0 + 1.0
-    kernels.sort_row_columns(row_ptr, columns, values)
+    sort_row_columns(row_ptr, columns, values)
     np.testing.assert_array_equal(columns, np.tile(ascending, 3))
     np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
 
@@ -634,7 +664,7 @@ def test_sort_row_columns_sorts_rows_short_and_long_with_their_values():
     values = columns * 10.0 + 1.0
     expected = np.concatenate([np.sort(columns[a:b]) for a, b in zip(row_ptr[:-1],
                                                                       row_ptr[1:])])
-    kernels.sort_row_columns(row_ptr, columns, values)
+    sort_row_columns(row_ptr, columns, values)
     np.testing.assert_array_equal(columns, expected)
     np.testing.assert_array_equal(values, columns * 10.0 + 1.0)
 
@@ -645,7 +675,7 @@ def test_sort_row_columns_sorts_each_row_with_its_values():
     columns = np.concatenate([[4], rng.permutation(4), [], rng.permutation(7) + 10])
     columns = columns.astype(np.int32)
     values = columns * 10.0 + 1.0
-    kernels.sort_row_columns(row_ptr, columns, values)
+    sort_row_columns(row_ptr, columns, values)
     for row in range(len(row_ptr) - 1):
         part = columns[row_ptr[row]:row_ptr[row + 1]]
         assert np.all(np.diff(part) > 0)
@@ -657,7 +687,7 @@ def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are
     position, velocity, pressure, is_dummy, n, indptr, cols, _ = scene
     radius = 2.1 * SPACING
     d = position.shape[1]
-    near_indptr, near_cols = kernels.pairs_within(indptr, cols, position, radius, n)
+    near_indptr, near_cols = pairs_within(indptr, cols, position, radius, n)
     for i in range(n):
         full = cols[indptr[i]:indptr[i + 1]]
         inside = full[((position[full] - position[i]) ** 2).sum(axis=1) < radius ** 2]
@@ -665,21 +695,21 @@ def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are
     assert near_indptr[-1] < 0.6 * indptr[-1]
     # Bit for bit: the pairs left out weigh exactly 0 in every sum on this radius.
     for over_full, over_near in zip(
-            kernels.number_density(indptr, cols, position, radius, n),
-            kernels.number_density(near_indptr, near_cols, position, radius, n)):
+            number_density(indptr, cols, position, radius, n),
+            number_density(near_indptr, near_cols, position, radius, n)):
         assert np.array_equal(over_full, over_near)
-    assert np.array_equal(kernels.divergence_sum(indptr, cols, position, velocity, radius, n),
-                          kernels.divergence_sum(near_indptr, near_cols, position, velocity,
-                                                 radius, n))
+    assert np.array_equal(divergence_sum(indptr, cols, position, velocity, radius, n),
+                          divergence_sum(near_indptr, near_cols, position, velocity,
+                                         radius, n))
     include = ~is_dummy
-    full = kernels.pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
-    near = kernels.pressure_gradient_sum(near_indptr, near_cols, position, pressure, include,
-                                         radius, n)
+    full = pressure_gradient_sum(indptr, cols, position, pressure, include, radius, n)
+    near = pressure_gradient_sum(near_indptr, near_cols, position, pressure, include,
+                                 radius, n)
     assert np.array_equal(full, near)
     n0, _ = reference_values(SPACING, radius, d)
-    kernels.correct_gradient(indptr, cols, position, include, radius, d / n0, full, 0.5)
-    kernels.correct_gradient(near_indptr, near_cols, position, include, radius, d / n0, near,
-                             0.5)
+    correct_gradient(indptr, cols, position, include, radius, d / n0, full, 0.5)
+    correct_gradient(near_indptr, near_cols, position, include, radius, d / n0, near,
+                     0.5)
     assert np.array_equal(full, near)
 
 
@@ -687,9 +717,9 @@ def test_pairs_within_keeps_the_pairs_inside_in_order_and_the_sums_over_them_are
 def test_pairs_within_is_the_same_whatever_room_it_is_given(scene, expected_pairs):
     position, _, _, _, n, indptr, cols, _ = scene
     radius = 2.1 * SPACING
-    exact_indptr, exact_cols = kernels.pairs_within(indptr, cols, position, radius, n)
-    got_indptr, got_cols = kernels.pairs_within(indptr, cols, position, radius, n,
-                                                expected_pairs=expected_pairs)
+    exact_indptr, exact_cols = pairs_within(indptr, cols, position, radius, n)
+    got_indptr, got_cols = pairs_within(indptr, cols, position, radius, n,
+                                        expected_pairs=expected_pairs)
     assert np.array_equal(got_indptr, exact_indptr)
     assert np.array_equal(got_cols, exact_cols)
     assert 0 < len(exact_cols) < indptr[n]
@@ -701,7 +731,7 @@ def test_pairs_within_keeps_a_pair_a_rounding_error_inside_the_radius():
     position = np.array([[0.0, 0.0], [0.1, 0.0], [0.0, 0.3]])
     indptr, cols = pair_list(position, 1.0)
     for radius in (0.1, 0.3, np.nextafter(0.1, 1.0), np.nextafter(0.3, 1.0)):
-        near_indptr, near_cols = kernels.pairs_within(indptr, cols, position, radius, 3)
+        near_indptr, near_cols = pairs_within(indptr, cols, position, radius, 3)
         for i in range(3):
             kept = set(near_cols[near_indptr[i]:near_indptr[i + 1]])
             for j in cols[indptr[i]:indptr[i + 1]]:
@@ -786,13 +816,13 @@ def test_the_checks_reductions_are_numpys(dimension):
     velocity = rng.normal(size=(3000, dimension)) * rng.uniform(0, 10, (3000, 1))
     mask = rng.uniform(size=3000) < 0.5
     expected = (velocity[mask] ** 2).sum(axis=1).max()
-    assert kernels.largest_norm2(velocity, mask) == expected
-    assert kernels.largest_norm2(velocity, np.zeros(3000, bool)) == 0.0
+    assert largest_norm2(velocity, mask) == expected
+    assert largest_norm2(velocity, np.zeros(3000, bool)) == 0.0
     position = rng.uniform(size=(3000, dimension))
     ids = rng.permutation(3000).astype(np.int64) + 10
-    assert kernels.lowest_id_not_finite(position, velocity, ids) == -1
+    assert lowest_id_not_finite(position, velocity, ids) == -1
     bad = [17, 400, 2999]
     position[17, -1] = np.inf
     velocity[400, 0] = np.nan
     position[2999, 0] = -np.inf
-    assert kernels.lowest_id_not_finite(position, velocity, ids) == ids[bad].min()
+    assert lowest_id_not_finite(position, velocity, ids) == ids[bad].min()

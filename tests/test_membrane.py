@@ -390,7 +390,7 @@ def _verlet_growth(m, vertices, mass, h, steps, seed=5):
         np.zeros((0, n, 3)), none, none, none, 0.0, h, steps, m.edges, m.max_length, m.kp,
         m.kbt_over_p, m.exponent, 0.0, membrane.EXTENSION_LIMIT, m.quads, m.rest_cosine,
         m.rest_sine, m.kb, m.rest_area, m.local_modulus, 0.0, m.triangle_law(), m.triangles,
-        m.rest, np.array([False, False]), 1e-12, 0)
+        m.rest, np.array([False, False]), 1e-12, 0, np.zeros(n), np.zeros((n, 3)))
     return np.abs(position - vertices).max() / np.abs(start).max()
 
 

@@ -8,10 +8,13 @@ coordinate by a uniform random amount in [-JITTER, JITTER] l0.
 import numpy as np
 import pytest
 
-from parmps.core import kernels, operators
+from parmps.core import operators
+from parmps.core.density import number_density, rows_beside, smooth_density
 from parmps.core.lattice import reference_values
-from parmps.core.neighbours import pair_list, rows_of
+from parmps.core.neighbours import pair_list, pairs_within, rows_of
 from parmps.fluid.schemes import khayyer_gotoh, kondo_koshizuka
+from parmps.fluid.schemes.gradient import correct_gradient, pressure_gradient_sum
+from parmps.fluid.schemes.laplacian import poisson_rows
 
 SPACING = 0.01
 SIDE = 25
@@ -65,7 +68,7 @@ def test_rate_is_zero_at_rest_and_so_are_all_sources():
                                              radius, len(position))
     assert np.all(rate == 0.0)
     n0 = khayyer_gotoh.lattice_sums(SPACING, radius)[0]
-    density, _ = kernels.number_density(indptr, cols, position, radius, len(position))
+    density, _ = number_density(indptr, cols, position, radius, len(position))
     inside = interior(position, 3 * SPACING)
     np.testing.assert_allclose(density[inside], n0, rtol=1e-12)
     assert np.all(khayyer_gotoh.higher_order_source(rate, DENSITY, n0, DT) == 0.0)
@@ -112,8 +115,8 @@ def test_rate_is_the_time_derivative_of_the_number_density(radius_factor):
     h = 1e-8 * SPACING / np.abs(velocity).max()
     distance = np.linalg.norm(position[cols] - position[rows_of(indptr)], axis=1)
     assert np.min(np.abs(distance - radius)) > 100 * h * 2 * np.abs(velocity).max()
-    forward, _ = kernels.number_density(indptr, cols, position + h * velocity, radius, n)
-    backward, _ = kernels.number_density(indptr, cols, position - h * velocity, radius, n)
+    forward, _ = number_density(indptr, cols, position + h * velocity, radius, n)
+    backward, _ = number_density(indptr, cols, position - h * velocity, radius, n)
     rate = khayyer_gotoh.number_density_rate(indptr, cols, position, velocity, radius, n)
     np.testing.assert_allclose(rate, (forward - backward) / (2 * h), rtol=1e-5,
                                atol=1e-6 * np.abs(rate).max())
@@ -216,8 +219,8 @@ def test_projection_normalisation_makes_hs_and_hl_consistent():
     pressure = 0.5 * ((position - 0.12) ** 2).sum(axis=1) + 0.3 * position[:, 0]
     indptr, cols = pair_list(position, radius)
     n = len(position)
-    gradient = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
-                                                        np.ones(n, bool), radius, n)
+    gradient = (2 / n0) * pressure_gradient_sum(indptr, cols, position, pressure,
+                                                np.ones(n, bool), radius, n)
     rate = khayyer_gotoh.number_density_rate(indptr, cols, position, gradient, radius, n)
     inside = interior(position, 5 * SPACING)
     projection = khayyer_gotoh.higher_order_laplacian_coefficient(SPACING, radius, "projection")
@@ -238,8 +241,8 @@ def test_hs_with_the_standard_laplacian_overcorrects_by_the_lattice_factor():
     pressure = 0.5 * ((position - 0.12) ** 2).sum(axis=1)
     indptr, cols = pair_list(position, laplacian_radius)
     n = len(position)
-    gradient = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
-                                                        np.ones(n, bool), radius, n)
+    gradient = (2 / n0) * pressure_gradient_sum(indptr, cols, position, pressure,
+                                                np.ones(n, bool), radius, n)
     rate = khayyer_gotoh.number_density_rate(indptr, cols, position, gradient, radius, n)
     pairs = operators.PairGeometry(indptr, rows_of(indptr), cols, position)
     n0_laplacian, lambda0 = reference_values(SPACING, laplacian_radius, 2)
@@ -270,11 +273,11 @@ def test_hl_rows_follow_the_poisson_rows_contract():
     indptr, cols = pair_list(position, radius + 0.3 * SPACING)
     coefficient = khayyer_gotoh.higher_order_laplacian_coefficient(SPACING, radius, "paper")
     shift, dirichlet = 7.0, 123.0
-    row_ptr, columns, values = kernels.poisson_rows(
+    row_ptr, columns, values = poisson_rows(
         indptr, cols, position, radius, row_number, is_unknown, coefficient, shift, dirichlet,
         True)
-    standard = kernels.poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
-                                    1.0, shift, dirichlet, False)
+    standard = poisson_rows(indptr, cols, position, radius, row_number, is_unknown,
+                            1.0, shift, dirichlet, False)
     # Same sparsity as the standard rows: both keep pairs with 0 < r < re.
     assert np.array_equal(row_ptr, standard[0]) and np.array_equal(columns, standard[1])
     size = len(row_ptr) - 1
@@ -304,15 +307,15 @@ def test_hl_rows_follow_the_poisson_rows_contract():
 def test_ecs_hand_values_and_where_it_vanishes():
     n0 = 10.0
     scale = DENSITY / (n0 * DT)
-    number_density = np.array([10.2, 9.8, 10.2, 9.8, 10.0, 10.3, 10.0])
+    densities = np.array([10.2, 9.8, 10.2, 9.8, 10.0, 10.3, 10.0])
     rate = np.array([5.0, -5.0, -5.0, 5.0, 7.0, 0.0, 0.0])
-    got = khayyer_gotoh.error_compensating_source(number_density, rate, DENSITY, n0, DT)
+    got = khayyer_gotoh.error_compensating_source(densities, rate, DENSITY, n0, DT)
     # Growing deviation (same signs): 2 |e| rate, positive when compressing further,
     # negative when expanding further; shrinking, at n0 or at rest: 0.
     expected = scale * np.array([2 * 0.02 * 5.0, -2 * 0.02 * 5.0, 0.0, 0.0, 0.0, 0.0, 0.0])
     np.testing.assert_allclose(got, expected, rtol=1e-12, atol=1e-12 * scale)
     # The paper's two terms with their dynamic coefficients, written out:
-    e = (number_density - n0) / n0
+    e = (densities - n0) / n0
     paper = (np.abs(e) * DENSITY / (n0 * DT) * rate
              + np.abs(DT / n0 * rate) * DENSITY / DT ** 2 * e)
     np.testing.assert_allclose(got, paper, rtol=1e-12, atol=1e-12 * scale)
@@ -369,12 +372,12 @@ def test_parmps_gradient_correction_is_the_papers():
     has_pressure = position[:, 1] > 1.5 * SPACING
     pressure = 1000.0 * (0.2 - position[:, 1]) + 50 * np.sin(30 * position[:, 0])
     indptr, cols = pair_list(position, radius)
-    gradient = (2 / n0) * kernels.pressure_gradient_sum(indptr, cols, position, pressure,
-                                                        has_pressure, radius, n)
+    gradient = (2 / n0) * pressure_gradient_sum(indptr, cols, position, pressure,
+                                                has_pressure, radius, n)
     # A tiny positive limit: only rows whose tensor is singular (dummies with at
     # most one neighbour that carries a pressure) keep the plain gradient.
-    kernels.correct_gradient(indptr, cols, position, has_pressure, radius, 2 / n0, gradient,
-                             1e-9)
+    correct_gradient(indptr, cols, position, has_pressure, radius, 2 / n0, gradient,
+                     1e-9)
     rows = np.flatnonzero(interior(position, 3 * SPACING, side=16))
     np.testing.assert_allclose(gradient[rows], corrected_gradient_paper(
         position, pressure, has_pressure, radius, n0, rows), rtol=1e-10, atol=1e-8)
@@ -401,10 +404,10 @@ def _step(position, velocity, position_star, velocity_star, constants, dt=DT):
     from parmps.fluid.projection import PressureStep
     n = len(position)
     indptr, cols = pair_list(position, constants.search_radius)
-    density_star, _ = kernels.number_density(indptr, cols, position_star,
-                                             constants.re_number_density, n)
-    near_indptr, near_cols = kernels.pairs_within(indptr, cols, position_star,
-                                                  constants.re_number_density, n)
+    density_star, _ = number_density(indptr, cols, position_star,
+                                     constants.re_number_density, n)
+    near_indptr, near_cols = pairs_within(indptr, cols, position_star,
+                                          constants.re_number_density, n)
     inside = np.flatnonzero(interior(position, 4 * SPACING))
     # Fluid only and no body force: the mixed source's body-force terms vanish here
     # (tests/test_mixed_still_column.py checks them).
@@ -451,8 +454,8 @@ def test_compensated_rate_adds_ecs_at_the_start_of_the_step():
     settings = {"normalisation": "paper"}
     got = CompensatedRateSource(settings, constants).rhs(step)
     index = step.unknown_index
-    density_k, _ = kernels.number_density(step.indptr, step.cols, position,
-                                          constants.re_number_density, len(position))
+    density_k, _ = number_density(step.indptr, step.cols, position,
+                                  constants.re_number_density, len(position))
     rate_k = khayyer_gotoh.number_density_rate(step.indptr, step.cols, position, velocity,
                                                constants.re_number_density, len(position))
     expected = (DensityRateSource(settings, constants).rhs(step)
@@ -478,8 +481,8 @@ def test_density_acceleration_takes_the_previous_density_one_step_back():
     index = step.unknown_index
 
     def density(x):
-        return kernels.number_density(step.indptr, step.cols, x,
-                                      constants.re_number_density, n)[0][index]
+        return number_density(step.indptr, step.cols, x,
+                              constants.re_number_density, n)[0][index]
 
     expected = (DENSITY / DT ** 2) * ((density(position_star) - 2 * density(position)
                                        + density(previous))
@@ -528,12 +531,12 @@ def test_smooth_density_matches_a_direct_sum_and_its_lattice_value():
     support = 2.3 * SPACING
     position = lattice(0.2, seed=5)
     indptr, cols = pair_list(position, 3.4 * SPACING)
-    got = kernels.smooth_density(indptr, cols, position, support, len(position))
+    got = smooth_density(indptr, cols, position, support, len(position))
     distance = np.linalg.norm(position[:, None, :] - position[None, :, :], axis=2)
     np.testing.assert_allclose(got, _wendland(distance, support).sum(axis=1), rtol=1e-12)
     inside = interior(position, 4 * SPACING)
-    full = kernels.smooth_density(*pair_list(lattice(), 3.4 * SPACING), lattice(), support,
-                                  SIDE * SIDE)
+    full = smooth_density(*pair_list(lattice(), 3.4 * SPACING), lattice(), support,
+                          SIDE * SIDE)
     reference = smooth_reference(SPACING, support, 2)
     np.testing.assert_allclose(full[interior(lattice(), 4 * SPACING)], reference, rtol=1e-12)
     # In 2D: 1 + 4 W(l0) + 4 W(sqrt2 l0) + 4 W(2 l0) + 8 W(sqrt5 l0).
@@ -554,8 +557,8 @@ def test_smooth_density_reads_square_and_hexagonal_lattices_alike_and_mps_does_n
                           for j in range(-12, 13) for i in range(-12, 13)])
     centre = int(np.argmin(np.linalg.norm(hexagonal, axis=1)))
     indptr, cols = pair_list(hexagonal, 3.4 * SPACING)
-    smooth = kernels.smooth_density(indptr, cols, hexagonal, support, len(hexagonal))[centre]
-    mps, _ = kernels.number_density(indptr, cols, hexagonal, support, len(hexagonal))
+    smooth = smooth_density(indptr, cols, hexagonal, support, len(hexagonal))[centre]
+    mps, _ = number_density(indptr, cols, hexagonal, support, len(hexagonal))
     from parmps.core.lattice import smooth_reference
     assert abs(smooth / smooth_reference(SPACING, support, 2) - 1.0) < 0.003
     assert mps[centre] / reference_values(SPACING, support, 2)[0] - 1.0 > 0.015
@@ -575,13 +578,13 @@ def test_the_relaxed_sources_measure_the_density_with_their_kernel(name):
     smooth = cls({**defaults, "relaxation": gamma, "kernel": "smooth"}, constants).rhs(step)
     mps = cls({**defaults, "relaxation": gamma, "kernel": "mps"}, constants).rhs(step)
     at = position_star if name == "density" else position
-    measure = kernels.smooth_density(step.indptr, step.cols, at, constants.re_number_density,
-                                     len(position))[step.unknown_index]
+    measure = smooth_density(step.indptr, step.cols, at, constants.re_number_density,
+                             len(position))[step.unknown_index]
     reference = smooth_reference(SPACING, constants.re_number_density, 2)
     term = gamma * DENSITY / DT ** 2 * (measure - reference) / reference
     if name == "mixed":
-        density_k, _ = kernels.number_density(step.indptr, step.cols, position,
-                                              constants.re_number_density, len(position))
+        density_k, _ = number_density(step.indptr, step.cols, position,
+                                      constants.re_number_density, len(position))
         n0 = constants.n0
         divergence_part = mps - gamma * DENSITY / DT ** 2 * \
             (density_k[step.unknown_index] - n0) / n0
@@ -609,7 +612,7 @@ def test_the_mixed_source_takes_the_density_source_beside_a_body(beside_bodies, 
         constants).rhs(step)
     node = np.zeros(len(position), bool)
     node[np.argmin(np.abs(position - 12 * SPACING).sum(axis=1))] = True
-    beside = kernels.rows_beside(step.near_indptr, step.near_cols, node, len(position))
+    beside = rows_beside(step.near_indptr, step.near_cols, node, len(position))
     # The node itself and the rows within the number density's radius of it.
     assert 1 + 8 <= np.count_nonzero(beside) <= 1 + 24
     from parmps.core.particles import FLUID, INFLOW, SOLID

@@ -8,12 +8,13 @@ a jittered lattice made more even, and nothing across a flat free surface.
 import numpy as np
 import pytest
 
-from parmps.core import kernels
+from parmps.core.density import smooth_density
 from parmps.core.lattice import smooth_reference
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import FLUID, SOLID, WALL
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.schemes import SHIFTINGS, scheme_class
+from parmps.fluid.schemes.shifting import concentration_gradient
 
 SPACING = 0.01
 
@@ -60,7 +61,7 @@ def test_the_concentration_gradient_is_the_gradient_of_the_smooth_density(d, sid
     n = len(position)
     indptr, cols = pair_list(position, support * 1.2)
     rows = np.ones(n, bool)
-    gradient = kernels.concentration_gradient(indptr, cols, position, support, rows, n)
+    gradient = concentration_gradient(indptr, cols, position, support, rows, n)
     h = 1e-7 * SPACING
     for i in np.flatnonzero(_inside(position, side, 2))[:5]:
         for k in range(d):
@@ -68,12 +69,12 @@ def test_the_concentration_gradient_is_the_gradient_of_the_smooth_density(d, sid
             for sign in (1, -1):
                 moved = position.copy()
                 moved[i, k] += sign * h
-                shifted.append(kernels.smooth_density(indptr, cols, moved, support, n)[i])
+                shifted.append(smooth_density(indptr, cols, moved, support, n)[i])
             assert gradient[i, k] == pytest.approx((shifted[0] - shifted[1]) / (2 * h),
                                                    rel=1e-5, abs=1e-6 / SPACING)
     full = _lattice(d, side)
     indptr, cols = pair_list(full, support * 1.2)
-    gradient = kernels.concentration_gradient(indptr, cols, full, support, rows, n)
+    gradient = concentration_gradient(indptr, cols, full, support, rows, n)
     inside = _inside(full, side, 3)
     assert np.abs(gradient[inside]).max() < 1e-10 / SPACING
     assert np.abs(gradient[~inside]).max() > 1.0 / SPACING  # the lattice's edge
@@ -102,7 +103,7 @@ def test_the_fickian_shift_evens_a_jittered_lattice_and_leaves_a_still_one(d, si
     reference = smooth_reference(SPACING, constants.re_number_density, d)
 
     def spread(x):
-        density = kernels.smooth_density(indptr, cols, x, constants.re_number_density, n)
+        density = smooth_density(indptr, cols, x, constants.re_number_density, n)
         return np.std(density[judged] / reference)
 
     before, after = spread(position), spread(position + shift)
@@ -125,8 +126,8 @@ def test_the_fickian_shift_keeps_only_the_surface_component_near_a_free_surface(
     rows = _inside(position[:, :-1], side, 2) & (np.rint(position[:, -1] / SPACING) >= 2)
     shift = shifting.shift(indptr, cols, position, velocity, top, rows, dt, n)
     near = rows & (position[:, -1] > (side - 1 - 3.1) * SPACING)
-    gradient = kernels.concentration_gradient(indptr, cols, position,
-                                              constants.re_number_density, near, n)
+    gradient = concentration_gradient(indptr, cols, position,
+                                      constants.re_number_density, near, n)
     assert np.all(gradient[near & top, -1] < 0.0)
     length = np.sqrt((shift ** 2).sum(axis=1))
     assert length[near].max() > 0.0

@@ -181,7 +181,8 @@ def test_held_force_substeps_match_the_numpy_loop_in_3d():
     a = acceleration(position, velocity)
     compiled = (position.copy(), velocity.copy(), a.copy())
     held_force_substeps(*compiled, body.inverse_mass, body.springs, body.rest_length,
-                        body.stiffness, body.damping, False, external, h, 30)
+                        body.stiffness, body.damping, False, external, h, 30,
+                        np.zeros(len(position)), np.zeros_like(position))
     for _ in range(30):
         velocity += 0.5 * h * a
         position += h * velocity

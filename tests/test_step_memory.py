@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from conftest import CASES, NoHalo, OneRank, case_of
-from parmps.core import kernels
-from parmps.geometry import scene
+from parmps.core.neighbours import pairs_within
 from parmps.fluid import projection
 from parmps.fluid.projection import FluidSolver
+from parmps.geometry import scene
 
 
 class _Quiet:
@@ -75,8 +75,8 @@ def test_the_matrix_is_assembled_without_the_search_list_over_its_sub_list(monke
     c = fluid.constants
     # The matrix's pairs: those of the search's list within the Laplacian's radius at the
     # predicted positions, in the same order.
-    expected_indptr, expected_cols = kernels.pairs_within(indptr, cols, seen["position"],
-                                                          c.re_laplacian, n)
+    expected_indptr, expected_cols = pairs_within(indptr, cols, seen["position"],
+                                                  c.re_laplacian, n)
     assert np.array_equal(seen["indptr"], expected_indptr)
     assert np.array_equal(seen["cols"], expected_cols)
     # In 32 bits: the sub-list is alive at the step's peak, the solver's set-up.

@@ -40,7 +40,8 @@ def test_reference_data_name_their_source_and_parse(name):
     with open(check.reference) as handle:
         assert handle.readline().startswith("# Source:")
     table = analysis.reference_table(check.reference)
-    assert all(len(column) > 5 for column in table.values())
+    # Five points at least: a curve, or the five Ca of the capsule's published steady D.
+    assert all(len(column) >= 5 for column in table.values())
 
 
 def test_the_spheric_level_record_wets_in_the_flows_order_and_starts_full_in_the_reservoir():

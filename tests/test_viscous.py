@@ -15,12 +15,11 @@ from mpi4py import MPI
 
 from conftest import case_of, run_parmps, ROOT
 from parmps import open_result
-from parmps.core import kernels
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, WALL
 from parmps.fluid.constants import MPSConstants
 from parmps.fluid.forces import fluid_force_parts
-from parmps.fluid.viscous import ImplicitViscosity
+from parmps.fluid.viscous import ImplicitViscosity, no_slip_velocity, vector_laplacian_sum
 from parmps.geometry import scene
 
 BOX = ROOT / "tests" / "cases" / "viscous_box.toml"
@@ -54,14 +53,14 @@ class Lattice:
         return field
 
     def laplacian(self, velocity):
-        return self.c.laplacian_coefficient * kernels.vector_laplacian_sum(
+        return self.c.laplacian_coefficient * vector_laplacian_sum(
             self.indptr, self.cols, self.particles.position, velocity, self.c.re_laplacian,
             self.n, self.moving)
 
     def no_slip(self, velocity):
         """The velocities the viscous term sees: the walls' extrapolated (as the step does)."""
-        return kernels.no_slip_velocity(self.indptr, self.cols, self.particles.position,
-                                        velocity, self.c.re_laplacian, self.n, self.moving)
+        return no_slip_velocity(self.indptr, self.cols, self.particles.position,
+                                velocity, self.c.re_laplacian, self.n, self.moving)
 
     def implicit(self, velocity, dt, steps, no_slip=True):
         """``steps`` backward-Euler steps of dt from ``velocity``, the walls' values from the

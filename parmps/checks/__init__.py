@@ -7,7 +7,7 @@ result.h5. ``CHECKS`` is the one place a check is registered, by the name the
 case gives as ``kind``.
 """
 
-import importlib
+from parmps import registry
 
 CHECKS = {
     "body_crossing": "parmps.checks.crossing:BodyCrossing",
@@ -19,7 +19,6 @@ def check_observers(case, result, model, interval, end_time):
     """One observer per ``[[check]]`` of the case, in the case's order."""
     observers = []
     for spec in case["check"]:
-        module, attribute = CHECKS[spec["kind"]].split(":")
-        kind = getattr(importlib.import_module(module), attribute)
+        kind = registry.load(CHECKS, spec["kind"])
         observers.append(kind(spec, case, result, model, interval, end_time))
     return observers

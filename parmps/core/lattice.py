@@ -7,7 +7,7 @@ lattice of spacing l0, full on every side.
 
 import numpy as np
 
-from parmps.core.kernels import wendland
+from parmps.core.pairs import wendland
 from parmps.core.operators import weight
 
 
@@ -47,7 +47,7 @@ def reference_values(spacing, radius, dimension):
 def smooth_reference(spacing, support, dimension):
     """The smooth density sum_j W(r_j), self included, of a particle inside the full lattice.
 
-    W is Wendland's C2 function of radius ``support`` (kernels.smooth_density).
+    W is Wendland's C2 function of radius ``support`` (density.smooth_density).
     """
     q = _lattice_distances(spacing, support, dimension) / support
     return float(np.sum([wendland(value) for value in q]))

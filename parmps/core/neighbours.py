@@ -14,6 +14,7 @@ import math
 
 import numba
 import numpy as np
+from parmps.core.pairs import PAIRS_WITHIN_MARGIN, for_each_dimension, pair_distance2
 
 # Cells per search radius. With cells as wide as the radius, the 3^d cells searched hold
 # 27 r^3 of space in 3D around a ball of 4.2 r^3; halved, 5^d half-cells hold 15.6 r^3.
@@ -131,7 +132,7 @@ def _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell, 
 @numba.njit(cache=True)
 def _search(position, n_rows, radius, cells, stride, order, cell_start, cell, indptr, indices,
             rows, reach, only_near, near, near_before):
-    # d as a literal, so the component loops unroll (see parmps.core.kernels).
+    # d as a literal, so the component loops unroll (see parmps.core.pairs).
     if position.shape[1] == 2:
         return _search_d(position, n_rows, radius, cells, stride, order, cell_start, cell,
                          indptr, indices, rows, reach, only_near, near, near_before, 2)
@@ -324,3 +325,50 @@ def close_pairs(position, distance):
     rows = rows_of(indptr)
     keep = rows < indices
     return rows[keep], indices[keep]
+
+
+@for_each_dimension
+def _pairs_within_into(d, indptr, cols, position, radius, n_rows, near_indptr, near_cols):
+    """Fills ``near_indptr`` and as many pairs as ``near_cols`` has room for; returns how
+    many pairs lie within ``radius`` (more than the room: the list is incomplete)."""
+    limit2 = radius * radius * (1.0 + PAIRS_WITHIN_MARGIN)
+    room = near_cols.shape[0]
+    total = 0
+    for i in range(n_rows):
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if pair_distance2(position, i, j, d) < limit2:
+                if total < room:
+                    near_cols[total] = j
+                total += 1
+        near_indptr[i + 1] = total
+    return total
+
+
+def pairs_within(indptr, cols, position, radius, n_rows, expected_pairs=None, dtype=np.int64):
+    """The sub-list of the CSR pair list (rows [0, n_rows)) whose pairs lie within
+    ``radius`` at ``position``, in the same order.
+
+    The search radius covers the Laplacian's radius plus a skin, so at the defaults it
+    holds twice the pairs within 2.3 l0 in 3D (2.9 l0 against 2.3), and in 2D 1.4 times
+    those within 3.1 l0 and 2.6 times those within 2.3 (3.7 l0): the operators on a
+    smaller radius visit that share of the pairs over the sub-list and give bit for bit
+    the same sums.
+
+    ``expected_pairs``: room to fill in one pass (a little more than the last step's
+    count, say); the cut runs again only when the pairs overflow it, and the result is
+    the same either way. None: room for the whole list, the result copied to its size
+    (a transient of the whole list's size: in 3D a step's largest). ``dtype``: the
+    sub-list's index type (32 bits halve it where the particles' count allows).
+    """
+    near_indptr = np.zeros(n_rows + 1, np.int64)
+    room = int(indptr[n_rows]) if expected_pairs is None else max(int(expected_pairs), 0)
+    near_cols = np.empty(room, dtype)
+    total = _pairs_within_into(indptr, cols, position, radius, n_rows, near_indptr, near_cols)
+    if total > room:
+        near_cols = np.empty(total, dtype)
+        _pairs_within_into(indptr, cols, position, radius, n_rows, near_indptr, near_cols)
+    if expected_pairs is None:
+        return near_indptr, near_cols[:total].copy()
+    return near_indptr, near_cols[:total]
+

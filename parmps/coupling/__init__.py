@@ -6,7 +6,7 @@ step (see :class:`parmps.run.steppers.FluidStepper`) that owns the exchange of
 forces and node states between the fluid and the solid model.
 """
 
-import importlib
+from parmps import registry
 
 SCHEMES = {
     "weak": "parmps.coupling.weak:WeakCoupling",
@@ -16,5 +16,4 @@ SCHEMES = {
 
 def coupling_scheme(case, model, comm, fluid):
     """The case's coupling scheme for ``model`` (a SolidModel) and ``fluid`` (its solver)."""
-    module, attribute = SCHEMES[case["coupling"]["scheme"]].split(":")
-    return getattr(importlib.import_module(module), attribute)(model, comm, fluid)
+    return registry.load(SCHEMES, case["coupling"]["scheme"])(model, comm, fluid)

@@ -12,7 +12,7 @@ What. The nodes become particles of their own density in the pressure
 equation, ``div (1/rho_i grad P) = source``: a node of mass m_i stands for a
 particle of density rho_i = m_i / l0^d (the fluid force on it is -l0^d grad P,
 so its acceleration is -grad P / rho_i), and pair ij's Laplacian weighs
-(1/rho_i + 1/rho_j)/2 (:func:`parmps.core.kernels.variable_density_poisson_rows`).
+(1/rho_i + 1/rho_j)/2 (:func:`parmps.fluid.schemes.laplacian.variable_density_poisson_rows`).
 The pressure then accounts for how far the nodes give way: the fluid and the
 nodes share one pressure solve, which is the implicit part a light body needs.
 Springs, dashpots, loads and the area constraint stay explicit: after the
@@ -24,26 +24,17 @@ are. Fluid-only neighbourhoods and bodies of the fluid's density give the
 weak coupling's matrix exactly, so at density ratio 1 the two schemes agree
 to round-off.
 
-Viscosity. The viscous force on a node is explicit: ``k_i (u_bar_i - u_i)``
-relaxes the node's velocity towards its neighbours' at the rate k_i / m_i,
-which for a light node is rho0/rho_i times the fluid's own. The step's viscous
-limit (time.viscous_number) keeps that explicit relaxation stable for a
-particle of the fluid's density only; a node at density ratio 0.1 in
-box_in_flow relaxes at dt k/m = 3.3 per step, beyond the explicit limit of 2.
-The node's own share of
-the relaxation beyond the fluid's is therefore taken implicitly (backward
-Euler in u_i): the force is divided by ``1 + dt k_i (1/m_i - 1/m_0)``, m_0 the
-mass of a fluid particle. At density ratio 1 and above the force is the weak
-coupling's unchanged. In a step beyond the viscous limit the fluid's viscous term is implicit
-(:mod:`parmps.fluid.viscous`) and the node's whole relaxation is taken implicitly, in either
-coupling (:meth:`parmps.coupling.weak.WeakCoupling.node_forces`).
+Viscosity. The viscous force on a node, ``k_i (u_bar_i - u_i)``, relaxes the node's
+velocity towards its neighbours' at the rate k_i / m_i, which for a light node is rho0/rho_i
+times the fluid's own (a node at density ratio 0.1 in box_in_flow: dt k/m = 3.3 per step,
+beyond an explicit limit of 2). Either coupling takes it as a drag backward Euler in every
+substep (:meth:`parmps.coupling.weak.WeakCoupling.node_forces`), stable at any rate.
 """
 
 import numpy as np
 
 from parmps.core.particles import SOLID
 from parmps.coupling.weak import WeakCoupling
-from parmps.fluid.forces import fluid_force_parts
 
 
 class ImplicitPressureCoupling(WeakCoupling):
@@ -56,8 +47,10 @@ class ImplicitPressureCoupling(WeakCoupling):
     def failure_cause(self, where=None):
         """For a light body: the explicit part of the exchange that still lags.
 
-        The pressure answers a light node's motion, but the body's springs, area constraint
-        and viscous force act on the fluid force held over the step. In the stability map
+        The pressure answers a light node's motion, but the body's springs and area constraint
+        act on the pressure force held over the step (the viscous drag is taken in the
+        substeps since 2026-12-02: box_in_flow at density 0.001 and 1e-4 at 10 U0, which
+        blew up before, then ran to 0.3 s; docs/history.md). In the stability map
         (docs/validation.md) every failure of box_in_flow under this scheme is a body
         lighter than the fluid in a fast flow (0.01 from 5 U0, 0.1 and 0.3 at 10 U0; density
         1 and 10 run at every speed): the fluid force grows by three orders or more within
@@ -70,7 +63,7 @@ class ImplicitPressureCoupling(WeakCoupling):
             return None
         return (f"{light} lighter than the fluid in a fast flow: under coupling.scheme = "
                 f"\"implicit_pressure\" the pressure answers a light body's motion, but its "
-                f"springs, area constraint and viscous force still act on the fluid force held "
+                f"springs and area constraint still act on the pressure force held "
                 f"over the step, and for a light body in a fast flow that lag grows from step "
                 f"to step (the added-mass instability's explicit remainder; docs/validation.md, "
                 f"Stability map). Shorten the step (time.dt_max) or make the body heavier")
@@ -85,15 +78,3 @@ class ImplicitPressureCoupling(WeakCoupling):
         nodes = np.flatnonzero(particles.kind == SOLID)
         mobility[nodes] = self.mobility_of(particles, nodes)
         return mobility
-
-    def node_forces(self, particles, rows, dt):
-        """Pressure force, plus the viscous force with a light node's excess relaxation
-        taken implicitly (see the module's docstring); after a step that took viscosity
-        implicitly, the weak coupling's force from the fluid's u* with the node's whole
-        relaxation implicit (:meth:`WeakCoupling.node_forces`)."""
-        if self.fluid.viscous_velocity is not None:
-            return super().node_forces(particles, rows, dt)
-        pressure_force, viscous_force, viscous_rate = fluid_force_parts(
-            particles, rows, self.fluid.constants, self.fluid.gradient)
-        excess = np.maximum(self.mobility_of(particles, rows) - 1.0, 0.0)
-        return pressure_force + viscous_force / (1.0 + dt * viscous_rate * excess)[:, None]

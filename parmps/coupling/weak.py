@@ -7,11 +7,13 @@ but the fluid step does not move them. After each fluid step:
 1. the fluid force on every owned node particle is evaluated from the new
    pressure and velocity, ``F_i = -V_i <grad P>_i + V_i mu <lap u>_i`` with
    ``V_i = l0^d``, the pressure gradient of the fluid's own gradient scheme
-   (:mod:`parmps.fluid.schemes`) and the MPS Laplacian;
+   (:mod:`parmps.fluid.schemes`) and the MPS Laplacian; the viscous part as a drag
+   towards the fluid neighbours' mean velocity (:meth:`WeakCoupling.node_forces`);
 2. the forces of each body's nodes, spread over the ranks whose slabs hold
    them, are summed on the body's owner (body k belongs to rank k mod size);
-3. the owner advances the body (the solid model's substeps) with the force
-   held, and broadcasts the nodes' positions, velocities and fluid forces;
+3. the owner advances the body (the solid model's substeps) with the pressure
+   force held and the drag taken implicitly in every substep, and broadcasts
+   the nodes' positions, velocities and fluid forces;
 4. every rank writes the new node states into the node particles it owns; the
    decomposition migrates them like any other particle at the next step.
 
@@ -57,7 +59,7 @@ from mpi4py import MPI
 from parmps.core.geometry import closed_surface_sides, inside_boundary, nearest_on_surface
 from parmps.core.particles import SOLID, owned_fluid_near
 from parmps.errors import RunFailure
-from parmps.fluid.forces import fluid_force_parts, fluid_forces
+from parmps.fluid.forces import fluid_force_parts
 from parmps.fluid.participant import Participant
 
 log = logging.getLogger(__name__)
@@ -273,19 +275,22 @@ class WeakCoupling(Participant):
                               positions=(0,))
         n = particles.n_owned
         rows = np.flatnonzero(particles.kind[:n] == SOLID)
-        force = self.node_forces(particles, rows, dt)
+        force, rate, target = self.node_forces(particles, rows)
         body_of = particles.body[rows]
         node_of = particles.node[rows]
+        d = force.shape[1]
         for k, body in enumerate(model.bodies):
             owner = self.owners[k]
             mine = body_of == k
-            local = np.zeros(body.fluid_force.shape)
-            local[node_of[mine]] = force[mine]
+            # Held force, drag rate and drag target in one reduction.
+            local = np.zeros((len(body.position), 2 * d + 1))
+            local[node_of[mine]] = np.column_stack([force[mine], rate[mine], target[mine]])
             total = np.zeros_like(local) if comm.rank == owner else None
             comm.Reduce(local, total, op=MPI.SUM, root=owner)
             state = np.empty((3,) + body.position.shape)
             if comm.rank == owner:
-                body.fluid_force[:] = total
+                body.fluid_force[:] = total[:, :d]
+                model.set_drag(k, total[:, d], total[:, d + 1:])
                 self.last_substeps[body.name] = model.advance_body(k, time, dt)
                 state[0], state[1], state[2] = body.position, body.velocity, body.fluid_force
             comm.Bcast(state, root=owner)
@@ -350,21 +355,30 @@ class WeakCoupling(Participant):
         """rho0/rho_i of the node particles ``nodes`` (indices into ``particles``)."""
         return self.node_mobility[self.first_node[particles.body[nodes]] + particles.node[nodes]]
 
-    def node_forces(self, particles, rows, dt):
-        """The fluid force on the owned node particles ``rows``, held over the bodies' step.
+    def node_forces(self, particles, rows):
+        """(held force (n, d), drag rate (n,), drag target (n, d)) of the owned node
+        particles ``rows``: the fluid's force split into its pressure part, held over the
+        bodies' step, and its viscous part ``k_i (u_bar_i - u_i)``, a drag towards the
+        fluid neighbours' mean velocity u_bar at the rate k_i/m_i, taken backward Euler in
+        every substep (:func:`parmps.solids.mass_spring.kernels.drag_kick`).
 
-        After a step that took viscosity implicitly (dt beyond the viscous limit) the viscous
-        force reads the fluid's u* (the velocities the fluid's own viscous term solved for
-        beside the nodes), and the node's relaxation towards its neighbours, at a rate
-        k_i/m_i the step's dt would make unstable explicitly, is taken backward Euler in the
-        node's velocity: divided by ``1 + dt k_i/m_i``."""
-        viscous_velocity = self.fluid.viscous_velocity
-        if viscous_velocity is None:
-            return fluid_forces(particles, rows, self.fluid.constants, self.fluid.gradient)
+        Why in the substeps: held over the step, the drag that resists a node's motion
+        relative to the fluid is fixed at the step's start while the body's own forces act
+        for the whole step; a membrane whose nodes relax in mu l0/G_s, shorter than the
+        step, then springs back unresisted every step and the shell is stiffer than its law
+        (a capsule in shear deformed 5 times less at a Courant step of 31 ms than at 5 ms).
+        After a step that took viscosity implicitly u_bar reads the fluid's u* (the
+        velocities the fluid's own viscous term solved for beside the nodes)."""
+        velocity = self.fluid.viscous_velocity
+        constants = self.fluid.constants
         pressure_force, viscous_force, viscous_rate = fluid_force_parts(
-            particles, rows, self.fluid.constants, self.fluid.gradient, viscous_velocity)
-        relaxation = dt * viscous_rate * self.mobility_of(particles, rows)
-        return pressure_force + viscous_force / (1.0 + relaxation)[:, None]
+            particles, rows, constants, self.fluid.gradient, velocity)
+        seen = (particles.velocity if velocity is None else velocity)[rows]
+        # k_i (u_bar - u_i) = rho0 V rate0 (u_bar - u_i), rate0 the rate of a fluid particle.
+        scale = constants.density * constants.spacing ** constants.dimension * viscous_rate
+        slip = np.divide(viscous_force, scale[:, None], out=np.zeros_like(viscous_force),
+                         where=scale[:, None] > 0.0)
+        return pressure_force, viscous_rate * self.mobility_of(particles, rows), seen + slip
 
     # Per-body series beyond the solid model's own: fluid particles inside the outline,
     # which would show a leak.

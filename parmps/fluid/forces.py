@@ -3,10 +3,11 @@ walls): ``-V <grad P> + V mu <lap u>``, ``V = l0^d``, with the fluid's own gradi
 
 import numpy as np
 
-from parmps.core import kernels
 from parmps.core.lattice import neighbour_count_reference
 from parmps.core.neighbours import pair_list
 from parmps.core.particles import DUMMY, FLUID, INFLOW
+from parmps.fluid.schemes.gradient import pressure_share_sum
+from parmps.fluid.viscous import fluid_drag_sum
 
 
 def fluid_forces(particles, rows, constants, gradient, velocity=None):
@@ -33,7 +34,7 @@ def fluid_force_parts(particles, rows, constants, gradient, velocity=None):
     pairs' viscous forces are equal and opposite.
 
     The viscous force is the reaction to the fluid's own viscous term beside a no-slip
-    wall, in which particle i carries ``2 u_i - <u>_i`` (:func:`kernels.no_slip_velocity`):
+    wall, in which particle i carries ``2 u_i - <u>_i`` (:func:`parmps.fluid.viscous.no_slip_velocity`):
     summed over its fluid neighbours j, ``V mu c w_ij (u_j - (2 u_i - <u>_i))`` is
     ``2 V mu c sum_j w_ij (u_j - u_i)``, c = 2d/(lambda0 n0): ``k_i (u_bar_i - u_i)`` with
     u_bar the weighted mean of the fluid neighbours' velocities. The rate returned is
@@ -59,9 +60,9 @@ def fluid_force_parts(particles, rows, constants, gradient, velocity=None):
         velocity = np.ascontiguousarray((particles.velocity if velocity is None
                                          else velocity)[order])
         kind = particles.kind[order]
-        drag, weight = kernels.fluid_drag_sum(indptr, cols, position, velocity,
-                                              constants.re_laplacian, n,
-                                              (kind == FLUID) | (kind == INFLOW))
+        drag, weight = fluid_drag_sum(indptr, cols, position, velocity,
+                                      constants.re_laplacian, n,
+                                      (kind == FLUID) | (kind == INFLOW))
         viscous_force = 2.0 * volume * constants.density * constants.viscosity * \
             coefficient * drag
         viscous_rate = 2.0 * constants.viscosity * coefficient * weight
@@ -93,13 +94,13 @@ def _rows_first_pairs(position, rows, constants):
 def pressure_force_from(particles, rows, constants, sources):
     """The pressure force ``-V <grad P>`` that the particles ``sources`` (a mask over every
     local particle) exert on the owned particles ``rows``: the plain gradient's terms of those
-    neighbours, with their absolute pressure (:func:`kernels.pressure_share_sum`). Summed over the fluid's rows and with
+    neighbours, with their absolute pressure (:func:`parmps.fluid.schemes.gradient.pressure_share_sum`). Summed over the fluid's rows and with
     the sign turned, the force of the fluid on a wall. Returns (len(rows), d)."""
     dimension = particles.position.shape[1]
     if len(rows) == 0:
         return np.empty((0, dimension))
     order, position, indptr, cols = _rows_first_pairs(particles.position, rows, constants)
-    share = kernels.pressure_share_sum(indptr, cols, position, particles.pressure[order],
-                                       sources[order] & (particles.kind[order] != DUMMY),
-                                       constants.re_number_density, len(rows))
+    share = pressure_share_sum(indptr, cols, position, particles.pressure[order],
+                               sources[order] & (particles.kind[order] != DUMMY),
+                               constants.re_number_density, len(rows))
     return -(constants.spacing ** dimension * constants.dimension / constants.n0) * share

@@ -11,17 +11,20 @@ import logging
 import time
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from parmps.core import kernels
-from parmps.core.neighbours import pair_list, rows_near
+from parmps.core.density import number_density
+from parmps.core.neighbours import pair_list, pairs_within, rows_near
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 from parmps.errors import RunFailure
+from parmps.fluid.collisions import collision_change
 from parmps.fluid.constants import MPSConstants
 from parmps.geometry.domain import Domain
 from parmps.fluid.schemes import (GRADIENTS, LAPLACIANS, SHIFTINGS, SOURCES, SURFACES,
                                   scheme_class)
-from parmps.fluid.viscous import ImplicitViscosity
+from parmps.fluid.schemes.laplacian import SURFACE_ROW
+from parmps.fluid.viscous import ImplicitViscosity, no_slip_velocity, vector_laplacian_sum
 
 log = logging.getLogger(__name__)
 
@@ -82,8 +85,8 @@ class PressureStep:
     def number_density_at(self, position, radius):
         """The number density of the owned rows with the particles at ``position``
         (owned, then ghosts; e.g. the start of the step), over this step's pair list."""
-        density, _ = kernels.number_density(self.indptr, self.cols, position, radius,
-                                            self.n_owned)
+        density, _ = number_density(self.indptr, self.cols, position, radius,
+                                    self.n_owned)
         return density
 
 
@@ -291,9 +294,9 @@ class FluidSolver:
         self.viscous_velocity, self.viscous_iterations = None, 0
         if c.viscosity > 0.0 and not s.implicit_viscosity:
             acceleration += (c.viscosity * c.laplacian_coefficient) * \
-                kernels.vector_laplacian_sum(s.indptr, s.cols, particles.position,
-                                             self._wall_velocity(s), c.re_laplacian, n,
-                                             moving)
+                vector_laplacian_sum(s.indptr, s.cols, particles.position,
+                                     self._wall_velocity(s), c.re_laplacian, n,
+                                     moving)
         velocity_star[:n][moving] += dt * acceleration[moving]
         if s.implicit_viscosity:
             self._viscous_solve(s, velocity_star)
@@ -302,10 +305,10 @@ class FluidSolver:
         self.decomposition.refresh([position_star, velocity_star], positions=(0,))
         if self.collision:
             timers.start("operators")
-            change = kernels.collision_change(s.indptr, s.cols, position_star, velocity_star,
-                                              self.moving(particles.kind),
-                                              self.collision_distance, self.restitution, n,
-                                              particles.position)
+            change = collision_change(s.indptr, s.cols, position_star, velocity_star,
+                                      self.moving(particles.kind),
+                                      self.collision_distance, self.restitution, n,
+                                      particles.position)
             velocity_star[:n] += change
             position_star[:n] += dt * change
             timers.start("halo")
@@ -337,7 +340,7 @@ class FluidSolver:
         (no slip), ghosts refreshed."""
         particles, c = s.particles, self.constants
         velocity = np.empty_like(particles.velocity)
-        velocity[:s.n] = kernels.no_slip_velocity(
+        velocity[:s.n] = no_slip_velocity(
             s.indptr, s.cols, particles.position, particles.velocity, c.re_laplacian, s.n,
             self.moving(particles.kind))
         self.timers.start("halo")
@@ -350,7 +353,7 @@ class FluidSolver:
         self.timers.start("operators")
         c = self.constants
         self._cut_sub_lists(s)
-        s.number_density, neighbour_count = kernels.number_density(
+        s.number_density, neighbour_count = number_density(
             s.near_indptr, s.near_cols, s.position_star, c.re_number_density, s.n)
         s.surface = s.number_density < self.surface_threshold * c.n0
         if self.neighbour_threshold > 0.0:
@@ -377,8 +380,8 @@ class FluidSolver:
         # 32-bit indices where a rank's particles allow (always, in practice): the sub-list
         # is alive at the step's peak, the solver's set-up (docs/performance.md).
         dtype = np.int32 if len(position) < 2 ** 31 else np.int64
-        sub = kernels.pairs_within(indptr, cols, position, radius, n,
-                                   expected_pairs=self.expected_cut[name], dtype=dtype)
+        sub = pairs_within(indptr, cols, position, radius, n,
+                           expected_pairs=self.expected_cut[name], dtype=dtype)
         # Room for the next step's cut in one pass, as for the search.
         self.expected_cut[name] = int(1.05 * len(sub[1])) + 64
         return sub
@@ -404,7 +407,7 @@ class FluidSolver:
         row_number = np.full(len(particles), -1, np.int64)
         row_number[pressure_index] = first_row + np.arange(len(pressure_index))
         is_unknown = np.zeros(len(particles), np.int8)
-        is_unknown[:n] = np.where(surface_unknown, kernels.SURFACE_ROW, unknown)
+        is_unknown[:n] = np.where(surface_unknown, SURFACE_ROW, unknown)
         self.timers.start("halo")
         self.decomposition.refresh([row_number, is_unknown])
 
@@ -541,7 +544,7 @@ def max_speed(particles, comm):
     """Largest fluid speed over all ranks."""
     n = particles.n_owned
     moving = FluidSolver.moving(particles.kind[:n])
-    local = float(np.sqrt(kernels.largest_norm2(particles.velocity[:n], moving)))
+    local = float(np.sqrt(largest_norm2(particles.velocity[:n], moving)))
     return comm.allreduce(local, op=_max_op())
 
 
@@ -553,8 +556,8 @@ def _max_op():
 def check_finite(particles, comm, step):
     """Stop loudly if any owned particle has a NaN or infinite position or velocity."""
     n = particles.n_owned
-    first = int(kernels.lowest_id_not_finite(particles.position[:n], particles.velocity[:n],
-                                             particles.id[:n]))
+    first = int(lowest_id_not_finite(particles.position[:n], particles.velocity[:n],
+                                     particles.id[:n]))
     worst = comm.allreduce(first if first >= 0 else np.iinfo(np.int64).max, op=_min_op())
     if worst != np.iinfo(np.int64).max:
         raise RunFailure(f"step {step}: particle {worst} has a non-finite position or velocity "
@@ -564,3 +567,33 @@ def check_finite(particles, comm, step):
 def _min_op():
     from mpi4py import MPI
     return MPI.MIN
+
+
+@numba.njit(cache=True)
+def largest_norm2(vectors, mask):
+    """The largest |v|^2 over the rows of ``vectors`` that ``mask`` selects (0 if none);
+    each row's squares summed in component order, as numpy's row sums add them."""
+    largest = 0.0
+    for i in range(vectors.shape[0]):
+        if mask[i]:
+            norm2 = 0.0
+            for k in range(vectors.shape[1]):
+                norm2 += vectors[i, k] * vectors[i, k]
+            if norm2 > largest:
+                largest = norm2
+    return largest
+
+
+@numba.njit(cache=True)
+def lowest_id_not_finite(position, velocity, ids):
+    """The lowest id among the rows with a NaN or infinite position or velocity, or -1."""
+    lowest = -1
+    for i in range(position.shape[0]):
+        finite = True
+        for k in range(position.shape[1]):
+            if not (np.isfinite(position[i, k]) and np.isfinite(velocity[i, k])):
+                finite = False
+        if not finite and (lowest < 0 or ids[i] < lowest):
+            lowest = ids[i]
+    return lowest
+

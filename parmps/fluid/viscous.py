@@ -13,7 +13,7 @@ the explicit term's Laplacian (its weights, radius and pair list at the start of
 step), with the unknowns the moving (fluid and inflow) particles of every rank and the
 others (walls, dummies, bodies' nodes) at the values the explicit term gives them:
 ``2 U_j - <u>_j``, the no-slip extrapolation across the wall's surface
-(:func:`parmps.core.kernels.no_slip_velocity`), of the unknowns themselves (taken from u^n
+(:func:`parmps.fluid.viscous.no_slip_velocity`), of the unknowns themselves (taken from u^n
 instead, the extrapolation converged so slowly at a thousand times the limit that a moving
 wall's fluid was still 11 % off its velocity after 30 steps). A free-surface particle keeps its row with the
 neighbours it has (no Dirichlet row: the stress-free surface of MPS). One matrix serves
@@ -33,9 +33,10 @@ the viscous limit never bound runs bit for bit as it did.
 
 import logging
 
+import numba
 import numpy as np
 
-from parmps.core import kernels
+from parmps.core.pairs import for_each_dimension, pair_distance2, weight_of_r2
 
 log = logging.getLogger(__name__)
 
@@ -103,8 +104,8 @@ class ImplicitViscosity:
         # The known neighbours' share of the Laplacian goes to the right-hand side: the sum
         # over a field that is 0 on the moving particles is sum_(j known) w_ij u_j.
         known[moving_local] = 0.0
-        known_sum = kernels.vector_laplacian_sum(indptr, cols, particles.position, known,
-                                                 c.re_laplacian, n, moving_local[:n])
+        known_sum = vector_laplacian_sum(indptr, cols, particles.position, known,
+                                         c.re_laplacian, n, moving_local[:n])
         guess = explicit_velocity[order]
         rhs = guess / (dt * c.viscosity) + c.laplacian_coefficient * known_sum[order]
         try:
@@ -119,7 +120,7 @@ class ImplicitViscosity:
     def _walls(self, particles, indptr, cols, moving_local, row_number, n_rows, PETSc):
         """The no-slip walls, implicit: a wall, dummy or node j with fluid neighbours carries
         ``2 U_j - sum_k w_jk u_k / S_j`` (S_j = sum_k w_jk over its fluid neighbours k), the
-        explicit term's extrapolation (:func:`parmps.core.kernels.no_slip_velocity`) of the
+        explicit term's extrapolation (:func:`parmps.fluid.viscous.no_slip_velocity`) of the
         unknowns themselves. Returns (the owned particles' known part, 2 U_j there and U_j
         elsewhere; the matrix ``2d/(lambda0 n0) B^T S^-1 B`` the rows gain, B_jk = w_jk:
         symmetric positive semi-definite, so the system stays symmetric positive definite)."""
@@ -162,3 +163,63 @@ class ImplicitViscosity:
         if self.solver is not None:
             self.solver.destroy()
             self.solver = None
+
+
+@for_each_dimension
+def vector_laplacian_sum(d, indptr, cols, position, field, radius, n_rows, rows=None):
+    """sum_j (u_j - u_i) w(r_ij) for an N×d field (times 2d/(lambda0 n0) gives the Laplacian).
+
+    ``rows``: optional mask of the rows wanted; the others are left 0 (walls do not move).
+    """
+    out = np.zeros((n_rows, d))
+    for i in range(n_rows):
+        if rows is not None and not rows[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            w = weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w > 0.0:
+                for k in range(d):
+                    out[i, k] += (field[j, k] - field[i, k]) * w
+    return out
+
+
+@for_each_dimension
+def fluid_drag_sum(d, indptr, cols, position, velocity, radius, n_rows, is_fluid, rows=None):
+    """``(sum_j (u_j - u_i) w_ij, sum_j w_ij)`` over the fluid neighbours j of the rows
+    ``n_rows`` (those ``rows`` selects; the others 0): what the no-slip wall's viscous force
+    on a wall, body or node particle is made of (:func:`no_slip_velocity`)."""
+    out = np.zeros((n_rows, d))
+    weights = np.zeros(n_rows)
+    for i in range(n_rows):
+        if rows is not None and not rows[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not is_fluid[j]:
+                continue
+            w = weight_of_r2(pair_distance2(position, i, j, d), radius)
+            if w > 0.0:
+                weights[i] += w
+                for k in range(d):
+                    out[i, k] += (velocity[j, k] - velocity[i, k]) * w
+    return out, weights
+
+
+@numba.njit(cache=True)
+def no_slip_velocity(indptr, cols, position, velocity, radius, n_rows, is_fluid):
+    """The velocity the viscous term sees at the rows ``n_rows``: a fluid particle's own; a
+    wall's, dummy's or body node's ``2 u_i - <u>_i``, ``<u>_i`` the mean of its fluid
+    neighbours' velocities weighted by w(r) (its own where it has none), so that the
+    velocity extrapolated across the wall's surface meets the wall's there (Adami, Hu &
+    Adams 2012's no-slip wall). From :func:`fluid_drag_sum`: ``2 u_i - <u>_i = u_i -
+    sum_j w_ij (u_j - u_i) / sum_j w_ij``."""
+    drag, weight = fluid_drag_sum(indptr, cols, position, velocity, radius, n_rows, is_fluid,
+                                  ~is_fluid[:n_rows])
+    out = velocity[:n_rows].copy()
+    for i in range(n_rows):
+        if weight[i] > 0.0:
+            for k in range(out.shape[1]):
+                out[i, k] -= drag[i, k] / weight[i]
+    return out
+

@@ -594,7 +594,14 @@ def enclosed_volume(position, facets):
 
     Positive when the facets face outward; the area in 2D.
     """
+    # Summed before the division by d!, as before the moments shared it: a lattice's volume
+    # stays exact (tests/test_solid_3d.py).
     x = _corners(position, facets)
+    return float(_determinants(x).sum()) / math.factorial(x.shape[-1])
+
+
+def _determinants(x):
+    """det[x_a; x_b; ...] of each facet's simplex with the apex, (m,): d! its volume."""
     d = x.shape[-1]
     determinant = np.zeros(len(x))
     for p, sign in _permutations(d):
@@ -602,4 +609,30 @@ def enclosed_volume(position, facets):
         for r in range(1, d):
             term = term * x[:, r, p[r]]
         determinant += term
-    return float(determinant.sum()) / math.factorial(d)
+    return determinant
+
+
+def enclosed_moments(position, facets):
+    """(V, centroid (d,), M (d, d)) of the region ``facets`` enclose: its volume, its
+    centre and its second moment M = int (x - c)(x - c)^T dV about that centre.
+
+    Each facet's signed simplex with the apex adds its own moments; a simplex of
+    volume v with corners y_0..y_d has int y y^T = v/((d+1)(d+2)) (sum y_a y_a^T +
+    (sum y_a)(sum y_a)^T) (the apex is y_0 = 0 here). An ellipsoid of semi-axes a_k
+    has eigenvalues V a_k^2 / (d + 2): the shape of a deformed capsule.
+    """
+    x = _corners(position, facets)
+    m, d = len(x), position.shape[1]
+    if m == 0:
+        return 0.0, np.zeros(d), np.zeros((d, d))
+    apex = np.asarray(position, dtype=float)[np.asarray(facets)[0, 0]]
+    v = _determinants(x) / math.factorial(d)
+    volume = float(v.sum())
+    # The simplex's centre is the mean of its d + 1 corners, the apex among them.
+    first = (v[:, None] * x.sum(axis=1)).sum(axis=0) / (d + 1)
+    total = x.sum(axis=1)
+    second = (np.einsum("m,mai,maj->ij", v, x, x) + np.einsum("m,mi,mj->ij", v, total, total))
+    second /= (d + 1) * (d + 2)
+    centre = first / volume
+    moment = second - volume * np.outer(centre, centre)
+    return volume, apex + centre, moment

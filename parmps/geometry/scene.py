@@ -74,6 +74,8 @@ def fluid_block(block, spacing, name, case=None, walls=None):
         if case is not None and case.get("wall"):
             position = clear_of_walls(position, walls, case, spacing, every_wall=False)
     velocity = np.tile(np.asarray(block["velocity"], dtype=float), (len(position), 1))
+    if block.get("velocity_gradient"):
+        velocity += position @ np.asarray(block["velocity_gradient"], dtype=float).T
     return position, np.full(len(position), FLUID, np.int8), velocity
 
 

@@ -25,6 +25,11 @@ SECTIONS = {
                                          "shape, of the box the fill is clipped to"),
         "upper": Key("vector", None, doc="upper corner of the block [m] (or of the clip)"),
         "velocity": Key("vector", ZERO, doc="initial velocity of its particles [m/s]"),
+        "velocity_gradient": Key("points", [],
+                                 doc="d rows du_i/dx_j [1/s]: the initial velocity is "
+                                     "velocity + G x (x from the origin of coordinates), "
+                                     "e.g. [[0, 1, 0], [0, 0, 0], [0, 0, 0]] a simple shear "
+                                     "u = y along x; [] none"),
         "shape": Key("str", "", choices=("", "cylinder", "sphere"),
                      doc="fill a cylinder (a circle in 2D) or a sphere instead of the box"),
         **SURFACE_KEYS,
@@ -75,6 +80,9 @@ def check(case):
                 if block[key] != SURFACE_KEYS[key].default:
                     raise CaseError(f"{label}.{key} applies to a fluid block with "
                                     f"shape = \"cylinder\" or \"sphere\" only")
+        if block["velocity_gradient"] and len(block["velocity_gradient"]) != dimension:
+            raise CaseError(f"{label}.velocity_gradient has {len(block['velocity_gradient'])} "
+                            f"rows but the case is {dimension}D: give {dimension} rows du_i/dx_j")
         if (block["lower"] is None) != (block["upper"] is None):
             raise CaseError(f"{label}: give both lower and upper, or neither")
         if block["lower"] is not None:

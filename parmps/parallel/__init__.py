@@ -7,7 +7,7 @@ package gets its decomposition from :func:`create_decomposition` and never
 names one.
 """
 
-import importlib
+from parmps import registry
 
 DECOMPOSITIONS = {
     "slabs": "parmps.parallel.slabs:SlabDecomposition",
@@ -20,8 +20,7 @@ CHOICES = ("auto",) + tuple(DECOMPOSITIONS)
 
 def decomposition_class(name):
     """The class registered under ``name``."""
-    module, attribute = DECOMPOSITIONS[name].split(":")
-    return getattr(importlib.import_module(module), attribute)
+    return registry.load(DECOMPOSITIONS, name)
 
 
 def create_decomposition(comm, case):
@@ -55,14 +54,12 @@ def choose_decomposition(ranks, case):
     choose_grid`) cuts more than one axis and saves at least a quarter of the
     slabs' ghosts. When no grid fits the halo, blocks refuse in their own words.
     """
-    from parmps.core.settings import search_radius
+    from parmps.parallel.base import halo_widths
     from parmps.parallel.grid import capacities, choose_grid, describe_grid, ghost_ratio
     if ranks == 1:
         return "slabs", "one rank"
     lower, upper = case["domain"]["lower"], case["domain"]["upper"]
-    margin = case["parallel"]["migration_margin"] * case["particles"]["spacing"]
-    reach = search_radius(case)
-    width, min_width = reach + margin, reach + 2 * margin
+    _, _, width, min_width = halo_widths(case)
     grid = choose_grid(ranks, lower, upper, min_width, width)
     if grid is None:
         return "blocks", f"no grid of {ranks} ranks fits the halo"

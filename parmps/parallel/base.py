@@ -44,6 +44,7 @@ results do not depend on the decomposition or the rank count beyond round-off.
 """
 
 import abc
+import collections
 import logging
 import time
 
@@ -67,6 +68,22 @@ log = logging.getLogger("parmps.parallel")
 FIRST_CUT_TOLERANCE = 1.02
 
 
+Halo = collections.namedtuple("Halo", "reach margin width min_width")
+
+
+def halo_widths(case):
+    """The case's :class:`Halo`: ``reach``, the pair search's radius; ``margin``, how far
+    an owned particle strays out of its region before it migrates
+    (``parallel.migration_margin`` spacings); ``width``, reach + margin, from within which
+    of a region its ghosts come (an owned particle strays up to the margin and sees up to
+    the reach); ``min_width``, reach + 2 margin, the narrowest region whose ghosts all come
+    from the regions beside it."""
+    reach = search_radius(case)
+    margin = float(case["parallel"].get("migration_margin", 0.0)) * float(
+        case["particles"]["spacing"])
+    return Halo(reach, margin, reach + margin, reach + 2.0 * margin)
+
+
 class Decomposition(abc.ABC):
     """Common state (halo widths, load-balance settings, timers) and the shared logic."""
 
@@ -83,17 +100,11 @@ class Decomposition(abc.ABC):
         self.lower, self.upper = self.domain.lower, self.domain.upper
         self.dimension = self.domain.dimension
         parallel = case["parallel"]
-        self.reach = search_radius(case)
-        self.margin = float(parallel.get("migration_margin", 0.0)) * spacing
-        # Owned particles stray up to the margin out of their region, and see up to
-        # the reach: ghosts come from within reach + margin of the region.
-        self.halo_width = self.reach + self.margin
+        self.reach, self.margin, self.halo_width, self.min_width = halo_widths(case)
         self.images = None
         if self.domain.is_periodic:
             self.domain.check_lattice(spacing, case["particles"]["origin"], self.halo_width)
             self.images = PeriodicImages(comm, self.domain, self.halo_width)
-        # Regions at least this wide get their ghosts from adjacent regions only.
-        self.min_width = self.reach + 2.0 * self.margin
         # Balance is by work, not count: each particle weighs its kind's cost.
         self.kind_weight = np.ones(max(KIND_NAMES) + 1)
         self.kind_weight[WALL] = parallel["wall_weight"]
@@ -186,8 +197,23 @@ class Decomposition(abc.ABC):
         """The owners' values into the neighbouring regions' ghost slots (lengths checked)."""
 
     @abc.abstractmethod
-    def rebalance(self, particles, step):
-        """Move the region boundaries when the load is uneven; returns owned-only."""
+    def _balanced_layout(self, particles):
+        """The region boundaries that balance the owned ``particles``' work (collective; the
+        same on every rank), in the implementation's own form (slabs' edges, blocks' cuts)."""
+
+    @abc.abstractmethod
+    def _refusal(self, layout):
+        """Why ``layout`` cannot be taken (it would make a region thinner than the halo), a
+        phrase for the log, or None."""
+
+    @abc.abstractmethod
+    def _take_layout(self, layout):
+        """Make ``layout`` this decomposition's (before the particles migrate to it); returns
+        what the log's line needs of the old one."""
+
+    @abc.abstractmethod
+    def _layout_change(self, old):
+        """The log's account of the new layout against ``old`` (after the migration)."""
 
     @abc.abstractmethod
     def owner(self, position):
@@ -234,6 +260,44 @@ class Decomposition(abc.ABC):
         particles = self.migrate(particles, eager)
         particles = self.rebalance(particles, step)
         return self.build_halo(particles)
+
+    def rebalance(self, particles, step):
+        """Move the region boundaries when the load is uneven (the triggers of
+        :meth:`_rebalance_reason`), to the layout that balances the work
+        (:meth:`_balanced_layout`), then migrate the particles to it; returns owned-only.
+        A layout that would make a region thinner than the halo is not taken (a warning,
+        repeated at most once per interval) and the run goes on unbalanced. Timed as a
+        migration."""
+        owned = particles.owned() if particles.n_ghost else particles
+        if self.size == 1:
+            return owned
+        return self._timed("migration_seconds", self._rebalance, owned, step)
+
+    def _rebalance(self, particles, step):
+        loads = self.loads(particles)
+        before = imbalance_of(loads)
+        periodic = step % self.rebalance_interval == 0
+        reason = self._rebalance_reason(loads, step)
+        if reason is None:
+            return particles
+        # Logged under the implementation's module, as each logged its own before.
+        logger = logging.getLogger(type(self).__module__)
+        layout = self._balanced_layout(particles)
+        refusal = self._refusal(layout)
+        if refusal is not None:
+            if self.rank == 0 and (periodic or not self._refused):
+                logger.warning("step %d: load imbalance %.3f, but %s", step, before, refusal)
+            self._refused = True
+            return particles
+        self._refused = False
+        old = self._take_layout(layout)
+        result = self._migrate(particles, force=True)
+        after = self.imbalance(result)
+        self._reference = (step, after)
+        self.rebalance_count += 1
+        logger.info("step %d: rebalanced %s (imbalance %.3f, %s) -> %.3f, %s", step, self.name,
+                    before, reason, after, self._layout_change(old))
+        return result
 
     def counts(self, particles):
         """Owned counts of every rank (int64 array, the same on every rank)."""

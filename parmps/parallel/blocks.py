@@ -52,7 +52,7 @@ from parmps.core.particles import FIELDS, Particles
 from parmps.errors import CaseError
 from parmps.parallel.balance import gap_quantiles, histogram_quantiles
 from parmps.parallel.base import Decomposition
-from parmps.parallel.exchange import (exchange, field_arrays, imbalance_of, merge_by_id, pack,
+from parmps.parallel.exchange import (exchange, field_arrays, merge_by_id, pack,
                                       send_to_ranks, sorted_by_id, unpack_into, unpack_new)
 from parmps.parallel.grid import capacities, choose_grid, describe_grid
 
@@ -332,43 +332,25 @@ class BlockDecomposition(Decomposition):
 
     # -- load balance ---------------------------------------------------------------------------
 
-    def rebalance(self, particles, step):
-        """Move the cuts to the nested quantiles when the load is uneven (the triggers of
-        :meth:`Decomposition._rebalance_reason`); returns owned-only. Cuts that would make
-        a block narrower than the halo are not taken (a warning) and the run goes on."""
-        owned = particles.owned() if particles.n_ghost else particles
-        if self.size == 1:
-            return owned
-        return self._timed("migration_seconds", self._rebalance, owned, step)
-
-    def _rebalance(self, particles, step):
-        loads = self.loads(particles)
-        before = imbalance_of(loads)
-        periodic = step % self.rebalance_interval == 0
-        reason = self._rebalance_reason(loads, step)
-        if reason is None:
-            return particles
-        cuts = self._histogram_cuts(particles.position[:particles.n_owned],
+    def _balanced_layout(self, particles):
+        """Nested cuts at the quantiles of the owned work (:meth:`_histogram_cuts`)."""
+        return self._histogram_cuts(particles.position[:particles.n_owned],
                                     self.weights(particles))
+
+    def _refusal(self, cuts):
         thin = self._thin_block(cuts)
-        if thin is not None:
-            if self.rank == 0 and (periodic or not self._refused):
-                log.warning("step %d: load imbalance %.3f, but balancing would make rank %d's "
-                            "block %.4g m wide along %s, thinner than the halo %.4g m: keeping "
-                            "the blocks", step, before, thin[0], thin[2], _AXES[thin[1]],
-                            self.min_width)
-            self._refused = True
-            return particles
-        self._refused = False
+        if thin is None:
+            return None
+        return (f"balancing would make rank {thin[0]}'s block {thin[2]:.4g} m wide along "
+                f"{_AXES[thin[1]]}, thinner than the halo {self.min_width:.4g} m: keeping the "
+                f"blocks")
+
+    def _take_layout(self, cuts):
         self.cuts = cuts
         self._set_boxes()
-        result = self._migrate(particles, force=True)
-        after = self.imbalance(result)
-        self._reference = (step, after)
-        self.rebalance_count += 1
-        log.info("step %d: rebalanced blocks (imbalance %.3f, %s) -> %.3f, %d neighbours on "
-                 "rank %d", step, before, reason, after, len(self._neighbours), self.rank)
-        return result
+
+    def _layout_change(self, old):
+        return f"{len(self._neighbours)} neighbours on rank {self.rank}"
 
     def _extra_of_parts(self, grid, k):
         """The extra work of each part of each group cut along axis k, (groups, grid[k]):

@@ -45,7 +45,6 @@ pickled on the per-step path.
 """
 
 import logging
-import time
 
 import numpy as np
 from mpi4py import MPI
@@ -54,8 +53,8 @@ from parmps.errors import CaseError
 from parmps.core.particles import FIELDS, Particles
 from parmps.parallel.balance import gap_quantiles, histogram_quantiles
 from parmps.parallel.base import Decomposition
-from parmps.parallel.exchange import (field_arrays, imbalance_of, merge_by_id, pack,
-                                      send_to_ranks, sorted_by_id, unpack_into, unpack_new)
+from parmps.parallel.exchange import (field_arrays, merge_by_id, pack, send_to_ranks,
+                                      sorted_by_id, unpack_into, unpack_new)
 
 log = logging.getLogger(__name__)
 
@@ -307,62 +306,28 @@ class SlabDecomposition(Decomposition):
 
     # -- load balance ---------------------------------------------------------------------------
 
-    def rebalance(self, particles, step):
-        """Move the slab edges to the quantiles of x when the load is uneven; returns owned-only.
+    def _balanced_layout(self, particles):
+        """Edges at the x quantiles of the owned work (:meth:`_histogram_edges`), or None
+        when every particle has the same x."""
+        return self._histogram_edges(particles.position[:particles.n_owned, 0],
+                                     self.weights(particles))
 
-        The load (max/mean owned work) is checked at every step, which costs one
-        small allgather: above ``imbalance_tolerance`` the slabs are rebalanced at
-        once, so no step runs out of balance. Every ``rebalance_interval`` steps
-        the drift of the load is also projected one interval ahead, and a load
-        heading past the tolerance is rebalanced before it gets there.
+    def _refusal(self, edges):
+        if edges is None:
+            return "every particle has the same x: keeping the slab edges"
+        thin = self._thin_slab(edges)
+        if thin is None:
+            return None
+        return (f"balancing would make rank {thin[0]}'s slab {thin[1]:.4g} m wide, thinner "
+                f"than the halo {self.min_slab_width:.4g} m: keeping the slab edges")
 
-        The new edges sit at the x quantiles of a two-level parallel histogram,
-        then the particles migrate. If the edges would make an interior slab
-        thinner than the halo, they stay where they are (a warning, repeated at
-        most once per interval) and the run goes on unbalanced.
-        """
-        owned = particles.owned() if particles.n_ghost else particles
-        if self.size == 1:
-            return owned
-        start = time.perf_counter()
-        try:
-            return self._rebalance(owned, step)
-        finally:
-            self.migration_seconds += time.perf_counter() - start
+    def _take_layout(self, edges):
+        old, self.edges = self.edges, edges
+        return old
 
-    def _rebalance(self, particles, step):
-        loads = self.loads(particles)
-        before = imbalance_of(loads)
-        periodic = step % self.rebalance_interval == 0
-        reason = self._rebalance_reason(loads, step)
-        if reason is None:
-            return particles
-        x = particles.position[:particles.n_owned, 0]
-        edges = self._histogram_edges(x, self.weights(particles))
-        thin = (0, 0.0) if edges is None else self._thin_slab(edges)
-        if thin is not None:
-            if self.rank == 0 and (periodic or not self._refused):
-                if edges is None:
-                    log.warning("step %d: load imbalance %.3f, but every particle has the same "
-                                "x: keeping the slab edges", step, before)
-                else:
-                    log.warning("step %d: load imbalance %.3f, but balancing would make rank "
-                                "%d's slab %.4g m wide, thinner than the halo %.4g m: keeping "
-                                "the slab edges", step, before, thin[0], thin[1],
-                                self.min_slab_width)
-            self._refused = True
-            return particles
-        self._refused = False
-        old = self.edges
-        self.edges = edges
-        result = self._migrate(particles, force=True)
-        after = self.imbalance(result)
-        self._reference = (step, after)
-        self.rebalance_count += 1
-        log.info("step %d: rebalanced slabs (imbalance %.3f, %s) -> %.3f, edges %s -> %s",
-                 step, before, reason, after, np.array2string(old[1:-1], precision=4),
-                 np.array2string(self.interior_edges, precision=4))
-        return result
+    def _layout_change(self, old):
+        return (f"edges {np.array2string(old[1:-1], precision=4)} -> "
+                f"{np.array2string(self.interior_edges, precision=4)}")
 
     def _histogram_edges(self, x, weights):
         """New edges at the quantiles of x weighted by work, from allreduced histograms

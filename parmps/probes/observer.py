@@ -149,8 +149,10 @@ class Probe:
             out["depth"] = DEPTH
         return out
 
-    def value(self, sums, bodies):
-        """``bodies``: name -> the body (its nodes' positions and fluid forces)."""
+    def value(self, sums, bodies, traction=None):
+        """``bodies``: name -> the body (its nodes' positions and fluid forces);
+        ``traction``: the walls' viscous forces (:class:`parmps.fluid.wall_traction.
+        WallTraction`), or None."""
         if self.kind == "displacement":
             body = bodies[self.spec["body"]]
             return body.position[self.spec["nodes"]].mean(axis=0) - self.rest
@@ -165,6 +167,9 @@ class Probe:
         # A sample with too little fluid beside it is dry: no load there.
         pressure = np.nan_to_num(shepard_pressure(sums, self.full_sum, self.min_fill))
         force = np.zeros(self.dimension)
+        if traction is not None and self.name in traction.blocks:
+            # The tangential stress the surface's pressure leaves out (a wall or wall box).
+            force += traction.viscous_force(self.name)
         offset = 0
         for row, area, normal in zip(self.rows, self.area, self.normals):
             count = row[3] * row[6]
@@ -179,12 +184,14 @@ class Probes(Observer):
     name = "probes"
 
     def __init__(self, result, specs, spacing, model, flush_interval, end_time, bodies=(),
-                 dimension=2, boxes=(), walls=None, domain=None):
+                 dimension=2, boxes=(), walls=None, domain=None, traction=None):
         """``bodies``: the case's [[body]] tables (a displacement probe's rest positions);
         ``boxes``: the case's wall boxes as ``(lower, upper)`` (a force probe on one);
         ``walls``: the named walls' surface samples (see :class:`Probe`); ``domain``: the
-        domain (its periodic axes: a sample beside a seam sees across it)."""
+        domain (its periodic axes: a sample beside a seam sees across it); ``traction``: the
+        viscous force on the walls the force probes read (a WallTraction), or None."""
         self.result = result
+        self.traction = traction
         self.domain = domain
         self.comm = result.comm
         self.model = model
@@ -258,7 +265,8 @@ class Probes(Observer):
         for k in due:
             probe = self.probes[k]
             count = probe.sample_count
-            values.append(probe.value(sums[offset:offset + count] if count else None, bodies))
+            values.append(probe.value(sums[offset:offset + count] if count else None, bodies,
+                                      self.traction))
             offset += count
         return values
 

@@ -20,7 +20,7 @@ import numba
 import numpy as np
 from mpi4py import MPI
 
-from parmps.core.kernels import wendland
+from parmps.core.pairs import wendland
 from parmps.core.lattice import smooth_reference
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
 

@@ -46,9 +46,11 @@ SECTIONS = {
                          "by two opposite corners [[x0, y0, z0], [x1, y1, z1]] [m]"),
         "wall_box": Key("int", -1, ge=-1,
                         doc="force: the index k of a fixed [[wall_box]] (0 for the first): "
-                            "the fluid's pressure force on all its faces; -1: none"),
+                            "the fluid's force on all its faces (the pressure sampled on "
+                            "them and the viscous force on its particles); -1: none"),
         "wall": Key("str", "", doc="force: the name of a fixed [[wall]] (of any shape): the "
-                                   "fluid's pressure force on all its surface"),
+                                   "fluid's force on all its surface (the pressure sampled "
+                                   "on it and the viscous force on its particles)"),
         "body": Key("str", "", doc="force: the body's name (the sum over its nodes); "
                                    "displacement: the body whose nodes are followed"),
         "nodes": Key("ints", [], ge=0,

@@ -51,6 +51,7 @@ class Simulation:
         self.end_time = case["time"]["end"] if end_time is None else end_time
         self.model = solid_model(case)
         self.coupling = None
+        self.wall_traction = None
         self.state = RunState()
         self.pressure_solver = None
         if has_fluid(case) or self.model is None:
@@ -106,9 +107,14 @@ class Simulation:
         if self.model is not None:
             from parmps.coupling import coupling_scheme
             self.coupling = coupling_scheme(case, self.model, comm, self.fluid)
+        # The viscous force on the walls force probes read, from the step's own velocities:
+        # after the fluid step, before an open boundary changes the particle set.
+        from parmps.fluid.wall_traction import WallTraction
+        self.wall_traction = WallTraction.from_scene(case, global_scene, origin, sources,
+                                                     self.fluid, self.end_time)
         # The order is the order of the hooks within a step.
-        participants = [p for p in (moving_walls, self.coupling, open_boundaries)
-                        if p is not None]
+        participants = [p for p in (moving_walls, self.wall_traction, self.coupling,
+                                    open_boundaries) if p is not None]
         self.stepper = FluidStepper(case, comm, self.decomposition, self.fluid, participants,
                                     initial_fluid=self.counts.get(KIND_NAMES[FLUID], 0))
 
@@ -165,7 +171,8 @@ class Simulation:
                                 self.model, interval, self.end_time, case["body"],
                                 case["dimension"],
                                 [(box["lower"], box["upper"]) for box in case["wall_box"]],
-                                probed_walls(case), Domain.from_case(case)))
+                                probed_walls(case), Domain.from_case(case),
+                                self.wall_traction))
         if case["check"]:
             from parmps.checks import check_observers
             found += check_observers(case, result, self.model, interval, self.end_time)

@@ -207,10 +207,9 @@ class FluidStepper:
             self.fluid.gravity = self.body_force.mean(time, time + dt)
         drive = energy.split_body_force(self.fluid.gravity, self.periodic)[1]
         power = self._drive_power(particles, drive)
-        buffer_energy = self._buffer_energy(particles)
+        buffers = self._buffer_velocities(particles)
         self.stats = self.fluid.step(particles, dt, step, dirichlet, mobility)
-        # What the buffers lost in the step the fluid's pressure and viscosity took.
-        self.exchanged_energy -= self._buffer_energy(particles) - buffer_energy
+        self.exchanged_energy += self._buffer_work(particles, buffers, dt)
         # The drive's work: the trapezoidal rule over the step, as the velocities change.
         self.exchanged_energy += 0.5 * dt * (power + self._drive_power(particles, drive))
         if self.body_force.varies:
@@ -234,17 +233,28 @@ class FluidStepper:
             self.gravity = energy.split_body_force(self.body_force.value(time),
                                                    self.periodic)[0]
 
-    def _buffer_energy(self, particles):
-        """This rank's mechanical energy of its owned inflow and outflow buffer particles,
-        under the step's body force. The step moves them like fluid before their
-        prescribed motion resets them: the energy they lose in it is the work the buffers
-        (pistons of a set speed) did on the fluid."""
+    @staticmethod
+    def _buffer_velocities(particles):
+        """(rows, velocities) of this rank's owned inflow and outflow buffer particles at the
+        start of a step: the velocities their prescribed motion gives them for the step."""
         n = particles.n_owned
-        buffers = particles.kind[:n] == INFLOW
-        if not buffers.any():
+        rows = np.flatnonzero(particles.kind[:n] == INFLOW)
+        return rows, particles.velocity[rows].copy()
+
+    def _buffer_work(self, particles, buffers, dt):
+        """This rank's work the buffers (pistons of a set speed) did on the fluid in a step:
+        minus the fluid's force on them, ``m (du/dt - g)`` from the velocity change the step
+        gave them (they move like fluid in it; their prescribed motion resets them after),
+        times the velocity they move at, ``u``. Their loss of mechanical energy would add
+        ``-m du^2 / 2``, which is no work (a piston's speed does not change in the step): it
+        is large where the buffer's pressure gradient is large against its speed, at the
+        start of a ramp (docs/history.md). The fluid step moves the particles in place: the
+        rows still hold them."""
+        rows, velocity = buffers
+        if not len(rows):
             return 0.0
-        return sum(energy.fluid_energy(particles, self.particle_mass, self.fluid.gravity,
-                                       self.energy_datum, buffers))
+        change = particles.velocity[rows] - velocity - dt * self.fluid.gravity
+        return -self.particle_mass * float(np.einsum("ij,ij->", velocity, change))
 
     def _first_moment(self, particles):
         """This rank's sum of m (x - datum) over its owned fluid."""

@@ -5,7 +5,7 @@ chooses it with ``[solid] model``, and where its class lives. Importing this
 package loads no model; :func:`solid_model` builds the case's.
 """
 
-import importlib
+from parmps import registry
 
 MODELS = {
     "mass_spring": "parmps.solids.mass_spring.model:MassSpringModel",
@@ -16,5 +16,4 @@ def solid_model(case):
     """The case's solid model with every body built, or None for a case without bodies."""
     if not case.get("body"):
         return None
-    module, attribute = MODELS[case["solid"]["model"]].split(":")
-    return getattr(importlib.import_module(module), attribute).from_case(case)
+    return registry.load(MODELS, case["solid"]["model"]).from_case(case)

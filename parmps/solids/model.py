@@ -87,6 +87,13 @@ class SolidModel:
         the substeps taken."""
         raise NotImplementedError
 
+    def set_drag(self, k, rate, target):
+        """The fluid's viscous drag on body k's nodes over its next advance_body, taken
+        implicitly in the substeps: ``m_i rate_i (target_i - v_i)``, ``rate`` (n_nodes,)
+        [1/s], ``target`` (n_nodes, d) [m/s]; after the advance ``fluid_force`` holds the held
+        force plus the step's mean drag."""
+        raise NotImplementedError
+
     def advance(self, time, dt):
         """Advance every body (solid-only runs, where every rank does the same)."""
         return {body.name: self.advance_body(k, time, dt) for k, body in enumerate(self.bodies)}

@@ -1199,6 +1199,44 @@ def flag_oscillation(path, case, probe="A", start=0.0, reference=None):
     return measured
 
 
+def cylinder_coefficients(path, case, probe="cylinder", front="front", back="back",
+                          start=0.0, end=None, mean_velocity=None, diameter=None,
+                          reference=None):
+    """Schäfer & Turek's steady figures from a force probe on the cylinder and pressure
+    probes at its front and back points, time-averaged over [``start``, ``end``] (the run's
+    end when None): ``drag`` and ``lift`` [N/m], ``cd = 2 F_D / (rho U^2 D)``, ``cl`` alike,
+    ``delta_p = (p_front - p_back) / rho`` [m^2/s^2, the benchmark's Pa per unit density],
+    each with its spread ``<name>_spread``: half the range of its means over the window's
+    quarters (how far the window's mean is settled); with ``reference`` (a table of the same
+    names) each one's relative error as ``<name>_error``. ``mean_velocity`` U and ``diameter``
+    D [m] as the case's inlet and cylinder give them when None."""
+    density = case["fluid"]["density"]
+    if mean_velocity is None:
+        mean_velocity = float(np.linalg.norm(case["inlet"][0]["velocity"]))
+    if diameter is None:
+        diameter = 2.0 * next(w["radius"] for w in case["wall"] if w["name"] == probe)
+    t, force = read_probe(path, probe)
+    end = float(t[-1]) if end is None else end
+    scale = 0.5 * density * mean_velocity ** 2 * diameter
+    series = {"drag": (t, force[:, 0]), "lift": (t, force[:, 1])}
+    t_front, p_front = read_probe(path, front)
+    t_back, p_back = read_probe(path, back)
+    series["delta_p"] = (t_front, (p_front - np.interp(t_front, t_back, p_back)) / density)
+    measured = {"end": end, "window": [start, end]}
+    for name, (time, value) in series.items():
+        edges = np.linspace(start, end, 5)
+        quarters = [window_mean(time, value, a, b) for a, b in zip(edges[:-1], edges[1:])]
+        measured[name] = window_mean(time, value, start, end)
+        measured[f"{name}_spread"] = 0.5 * float(np.ptp(quarters))
+    for name in ("drag", "lift"):
+        coefficient = "cd" if name == "drag" else "cl"
+        measured[coefficient] = measured[name] / scale
+        measured[f"{coefficient}_spread"] = measured[f"{name}_spread"] / scale
+    for name, expected in (reference or {}).items():
+        measured[f"{name}_error"] = measured[name] / expected - 1.0
+    return measured
+
+
 # --------------------------------------------------------------------------
 # A wall of any shape in a violent flow: the wall_crossing check's record
 
@@ -1363,3 +1401,77 @@ def built_alike(path, case, beside, probes, window, arrival_threshold):
                      "mean_error": mean / mean_beside - 1.0,
                      "arrival_error": arrival - arrival_beside}
     return out
+
+
+# A capsule in simple shear: its Taylor deformation
+
+def simple_shear(case):
+    """(flow axis, gradient axis, shear rate [1/s]) of a case sheared between two wall boxes
+    moving along one axis: the rate is their speed difference over the gap between their
+    inner faces."""
+    walls = [w for w in case["wall_box"] if any(w["velocity"])]
+    if len(walls) != 2:
+        raise ValueError("a simple shear needs exactly two moving wall boxes")
+    speed = [np.asarray(w["velocity"], dtype=float) for w in walls]
+    flow = int(np.argmax(np.abs(speed[0] - speed[1])))
+    centre = [0.5 * (np.asarray(w["lower"]) + np.asarray(w["upper"])) for w in walls]
+    gradient = int(np.argmax(np.abs(centre[0] - centre[1])))
+    low, high = sorted(range(2), key=lambda k: centre[k][gradient])
+    gap = walls[high]["lower"][gradient] - walls[low]["upper"][gradient]
+    return flow, gradient, float((speed[high][flow] - speed[low][flow]) / gap)
+
+
+def taylor_deformation(moment, plane):
+    """(D, inclination) of shapes from their second moments ``moment`` (k, d, d): D = (L - B)
+    / (L + B) of the semi-axes in the ``plane`` (flow axis, gradient axis) of the ellipsoid with
+    the same moments (its semi-axes go as the square roots of the moment's eigenvalues), and
+    the angle [rad] of its long axis from the flow axis towards the gradient axis."""
+    moment = np.asarray(moment, dtype=float)
+    block = moment[:, plane][:, :, plane]
+    values, vectors = np.linalg.eigh(block)
+    root = np.sqrt(np.clip(values, 0.0, None))
+    deformation = (root[:, 1] - root[:, 0]) / (root[:, 1] + root[:, 0])
+    long_axis = vectors[:, :, 1] * np.sign(vectors[:, 0, 1])[:, None]
+    return deformation, np.arctan2(long_axis[:, 1], long_axis[:, 0])
+
+
+def capsule_shear(path, case, body="capsule", steady_from=6.0, reference=None):
+    """The Taylor deformation of a capsule in simple shear (Ramanujan & Pozrikidis 1998):
+    ``capillary`` Ca = mu a gamma_dot / G_s from the case (mu = rho nu, a the shell's
+    radius, G_s its membrane's shear modulus), the series ``strain`` (gamma_dot t),
+    ``deformation`` and ``inclination`` (in units of pi), the ``steady`` D (mean over
+    gamma_dot t >= ``steady_from``), its ``drift`` (the change of D over that window),
+    ``slope`` D/Ca, the largest ``volume_error``; with ``reference`` (a table of
+    published steady D, columns Ca and the sources) the published values at this Ca and
+    ``steady_error`` against each as ``<source>_error``."""
+    flow, gradient, rate = simple_shear(case)
+    spec = next(b for b in case["body"] if b["name"] == body)
+    viscosity = case["fluid"]["density"] * case["fluid"]["viscosity"]
+    capillary = viscosity * spec["radius"] * rate / spec["shear_modulus"]
+    with open_result(path) as result:
+        series = result.bodies[body]
+        time = np.asarray(series["time"])
+        moment = np.asarray(series["second_moment"])
+        volume_error = float(np.abs(series["volume_error"]).max())
+    deformation, inclination = taylor_deformation(moment, [flow, gradient])
+    strain = rate * time
+    window = strain >= steady_from
+    if not window.any():
+        raise ValueError(f"the run ends at gamma_dot t = {strain[-1]:.3g}, before the steady "
+                         f"window from {steady_from}")
+    steady = float(deformation[window].mean())
+    measured = {"capillary": capillary, "shear_rate": rate, "end_strain": float(strain[-1]),
+                "steady": steady, "slope": steady / capillary,
+                "drift": float(deformation[window][-1] - deformation[window][0]),
+                "inclination_steady": float(inclination[window].mean() / math.pi),
+                "volume_error": volume_error, "strain": strain, "deformation": deformation,
+                "inclination": inclination / math.pi}
+    if reference is not None:
+        table = reference_table(reference)
+        row = int(np.argmin(np.abs(np.asarray(table["Ca"]) - capillary)))
+        if abs(table["Ca"][row] / capillary - 1.0) < 1e-6:
+            for source, values in table.items():
+                if source != "Ca" and np.isfinite(values[row]):
+                    measured[source] = float(values[row])
+                    measured[f"{source}_error"] = steady / float(values[row]) - 1.0
+    return measured

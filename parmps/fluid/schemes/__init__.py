@@ -16,7 +16,7 @@ Laplacian, GC the ``corrected`` gradient; Kondo & Koshizuka's second time
 difference is ``density_acceleration``.
 """
 
-import importlib
+from parmps.registry import load
 
 SOURCES = {
     "density": "parmps.fluid.schemes.density:DensitySource",
@@ -51,8 +51,7 @@ SHIFTINGS = {
 def scheme_class(registry, name):
     """The class registered under ``name`` in ``registry`` (SOURCES, LAPLACIANS, GRADIENTS,
     SURFACES or SHIFTINGS)."""
-    module, attribute = registry[name].split(":")
-    return getattr(importlib.import_module(module), attribute)
+    return load(registry, name)
 
 
 def registered():

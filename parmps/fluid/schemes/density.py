@@ -18,7 +18,8 @@ The measure is the case's choice, ``[mps.<source>] kernel``:
 """
 
 from parmps.config import Key
-from parmps.core import kernels, lattice
+from parmps.core import lattice
+from parmps.core.density import smooth_density
 
 DENSITY_KERNELS = ("smooth", "mps")
 
@@ -61,8 +62,8 @@ class MeasuredSource(RelaxedSource):
         else:
             position, indptr, cols = step.position, step.indptr, step.cols
         if self.kernel == "smooth":
-            measure = kernels.smooth_density(indptr, cols, position, c.re_number_density,
-                                             step.n_owned)
+            measure = smooth_density(indptr, cols, position, c.re_number_density,
+                                     step.n_owned)
             return (measure[index] - self.smooth0) / self.smooth0
         number_density = (step.number_density if predicted
                           else step.number_density_at(position, c.re_number_density))

@@ -1,6 +1,6 @@
 """Khayyer & Gotoh's stabilised pressure schemes: HS, HL, ECS (docs/schemes.md).
 
-Pair loops in the style of :mod:`parmps.core.kernels` (rows are the owned
+Pair loops in the style of :mod:`parmps.core.pairs` (rows are the owned
 particles, columns owned or ghost, distances evaluated on the fly), written for
 any dimension d = ``position.shape[1]``, plus thin numpy functions that turn
 their sums into pressure-equation terms.
@@ -30,7 +30,7 @@ formulas and was read alongside.
 import numba
 import numpy as np
 
-from parmps.core.kernels import pair_component, pair_distance2
+from parmps.core.pairs import pair_component, pair_distance2
 
 
 @numba.njit(cache=True)
@@ -66,7 +66,7 @@ def higher_order_laplacian_sum(indptr, cols, position, field, include, radius, n
     Times the HL coefficient (``higher_order_laplacian_coefficient``) this is
     Khayyer & Gotoh's (2010) higher-order Laplacian of a scalar field; with
     ``include`` = "carries a pressure" it is minus the action of the matrix that
-    ``kernels.poisson_rows(..., inverse_cube=True)`` builds, for rows whose
+    ``laplacian.poisson_rows(..., inverse_cube=True)`` builds, for rows whose
     neighbours are all unknowns.
     """
     dimension = position.shape[1]

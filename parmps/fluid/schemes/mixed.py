@@ -39,7 +39,9 @@ docs/design.md §1.4). ``"divergence"``: the earlier form.
 import numpy as np
 
 from parmps.config import Key
-from parmps.core import kernels
+from parmps.core.density import rows_beside
+from parmps.core.pairs import (for_each_dimension, laplacian_weight, pair_component,
+                               pair_distance2, weight_of_r2)
 from parmps.core.particles import DUMMY, FLUID, INFLOW, SOLID
 from parmps.fluid.schemes.density import MeasuredSource, kernel_key
 
@@ -95,7 +97,7 @@ class MixedSource(MeasuredSource):
             moving = (step.kind == FLUID) | (step.kind == INFLOW)
             velocity = velocity.copy()
             velocity[moving] -= step.dt * np.asarray(step.gravity)
-        divergence = (c.dimension / c.n0) * kernels.divergence_sum(
+        divergence = (c.dimension / c.n0) * divergence_sum(
             step.near_indptr, step.near_cols, step.position_star, velocity,
             c.re_number_density, step.n_owned)
         rhs = (-(c.density / step.dt) * divergence[index]
@@ -103,7 +105,7 @@ class MixedSource(MeasuredSource):
                * self.density_error(step, predicted=False))
         if split:
             laplacian = step.laplacian
-            flux = kernels.missing_pair_flux(
+            flux = missing_pair_flux(
                 step.indptr, step.cols, step.position_star,
                 np.asarray(step.gravity, dtype=float), step.kind == DUMMY, c.re_laplacian,
                 laplacian.inverse_cube, step.n_owned)
@@ -125,4 +127,47 @@ class MixedSource(MeasuredSource):
         node = (step.kind == SOLID) | (step.kind == INFLOW)
         if not np.any(node):
             return np.zeros(step.n_owned, bool)
-        return kernels.rows_beside(step.near_indptr, step.near_cols, node, step.n_owned)
+        return rows_beside(step.near_indptr, step.near_cols, node, step.n_owned)
+
+
+@for_each_dimension
+def divergence_sum(d, indptr, cols, position, field, radius, n_rows):
+    """sum_j (u_j - u_i) . r_ij w / |r_ij|^2 (times d/n0 gives the divergence)."""
+    out = np.zeros(n_rows)
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            r2 = pair_distance2(position, i, j, d)
+            w = weight_of_r2(r2, radius)
+            if w > 0.0:
+                projected = 0.0
+                for k in range(d):
+                    projected += (field[j, k] - field[i, k]) * pair_component(position, i, j, k)
+                total += projected * w / r2
+        out[i] = total
+    return out
+
+
+@for_each_dimension
+def missing_pair_flux(d, indptr, cols, position, vector, missing, radius, inverse_cube, n_rows):
+    """sum_j w_ij (a . r_ij) over the neighbours j flagged ``missing`` (0 < r < radius), w
+    the Laplacian's weight (:func:`laplacian_weight`): what those pairs would add to the
+    Laplacian's sum of the linear field of gradient ``a`` (times the Laplacian's
+    coefficient), the pairs the pressure matrix leaves out (dummies carry no pressure)."""
+    out = np.zeros(n_rows)
+    for i in range(n_rows):
+        total = 0.0
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not missing[j]:
+                continue
+            w = laplacian_weight(pair_distance2(position, i, j, d), radius, inverse_cube)
+            if w > 0.0:
+                projected = 0.0
+                for k in range(d):
+                    projected += vector[k] * pair_component(position, i, j, k)
+                total += w * projected
+        out[i] = total
+    return out
+

@@ -26,7 +26,7 @@ lattice, so the source sees the flow's compression, not the particles' disorder.
   Tsuruta, Khayyer & Gotoh (2013, Comput. Fluids 82:158): a pairwise velocity change,
   not a move, for the pairs closer than ``distance`` l0 after the correction, which gives
   each such pair the separation speed that takes it ``separation`` of the way back to
-  that distance in one step (``kernels.stabilisation_change``; the form here is this
+  that distance in one step (``stabilisation_change``; the form here is this
   solver's reading of the idea, not the paper's formula, which was not at hand). Two
   fluid particles share it equally, so momentum is kept; a particle takes the whole of
   it from a wall (bodies' nodes are left out). The position follows the velocity (``dt``
@@ -41,8 +41,10 @@ rows (None: no change).
 import numpy as np
 
 from parmps.config import Key
-from parmps.core import kernels, lattice
+from parmps.core.pairs import for_each_dimension, pair_component, pair_distance2
+from parmps.core import lattice
 from parmps.core.particles import DUMMY, FLUID, INFLOW, WALL
+from parmps.fluid.schemes.surface import surface_fitted_normals, surface_normals
 
 
 class NoShifting:
@@ -89,15 +91,15 @@ class FickianShifting(NoShifting):
         ``on_surface``: every local particle that is on the water's free surface."""
         c = self.constants
         support = c.re_number_density
-        gradient = kernels.concentration_gradient(indptr, cols, position, support, rows,
-                                                  n_rows) / self.smooth0
+        gradient = concentration_gradient(indptr, cols, position, support, rows,
+                                          n_rows) / self.smooth0
         speed = np.sqrt((velocity[:n_rows] ** 2).sum(axis=1))
         diffusion = self.coefficient * 0.5 * support * speed * dt
         shift = -diffusion[:, None] * gradient
-        raw = kernels.surface_normals(indptr, cols, position, on_surface, c.re_laplacian,
-                                      n_rows)
-        normal = kernels.surface_fitted_normals(indptr, cols, position, raw, on_surface,
-                                                c.re_laplacian, n_rows)
+        raw = surface_normals(indptr, cols, position, on_surface, c.re_laplacian,
+                              n_rows)
+        normal = surface_fitted_normals(indptr, cols, position, raw, on_surface,
+                                        c.re_laplacian, n_rows)
         shift -= (shift * normal).sum(axis=1)[:, None] * normal
         length = np.sqrt((shift ** 2).sum(axis=1))
         too_far = length > self.max_shift
@@ -130,6 +132,70 @@ class DynamicStabilisation(NoShifting):
         # The walls, not the bodies' nodes: the change would push a body without its
         # reaction on it (the coupling moves the bodies by the fluid's pressure).
         fixed = (kind == WALL) | (kind == DUMMY)
-        change = kernels.stabilisation_change(indptr, cols, position, velocity, moving, fixed,
-                                              self.distance, self.separation, dt, n_rows)
+        change = stabilisation_change(indptr, cols, position, velocity, moving, fixed,
+                                      self.distance, self.separation, dt, n_rows)
         return dt * change, change
+
+
+@for_each_dimension
+def concentration_gradient(d, indptr, cols, position, support, rows, n_rows):
+    """``grad_i sum_j W(r_ij)`` of the rows in ``rows`` (0 for the others), W Wendland's C2
+    function of radius ``support``: the gradient of :func:`smooth_density`, which points
+    to where the neighbours crowd."""
+    gradient = np.zeros((n_rows, d))
+    inverse_square = 1.0 / (support * support)
+    for i in range(n_rows):
+        if not rows[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            r2 = pair_distance2(position, i, j, d)
+            if r2 >= support * support:
+                continue
+            # grad_i W(|x_i - x_j| / s) = 20 (1 - q)^3 r_ij / s^2 for Wendland's C2
+            # function (r_ij = x_j - x_i): no 1/r, so coincident pairs are harmless.
+            a = 1.0 - np.sqrt(r2) / support
+            factor = 20.0 * a * a * a * inverse_square
+            for k in range(d):
+                gradient[i, k] += factor * pair_component(position, i, j, k)
+    return gradient
+
+
+@for_each_dimension
+def stabilisation_change(d, indptr, cols, position, velocity, moving, fixed, distance,
+                         separation, dt, n_rows):
+    """Velocity changes of the moving rows [0, n_rows) from the pairs closer than
+    ``distance`` at ``position`` with a moving or a ``fixed`` partner (others are left
+    out): each such pair whose separation speed along its line is
+    below ``separation (distance - r) / dt`` is given that speed, shared equally between two
+    moving particles (their momentum is kept), taken whole by a moving particle from a fixed
+    partner. ``separation`` = 0 only stops the approach (no pair gains kinetic energy).
+    Uses the velocities before any change, so the result is independent of pair order."""
+    out = np.zeros((n_rows, d))
+    limit2 = distance * distance
+    for i in range(n_rows):
+        if not moving[i]:
+            continue
+        for p in range(indptr[i], indptr[i + 1]):
+            j = cols[p]
+            if not (moving[j] or fixed[j]):
+                continue
+            r2 = pair_distance2(position, i, j, d)
+            if r2 >= limit2 or r2 <= 0.0:
+                continue
+            r = np.sqrt(r2)
+            # w: the pair's separation speed along e = r_ij / r; wanted: enough to be
+            # ``separation`` of the way back to ``distance`` by the end of the next step.
+            w = 0.0
+            for k in range(d):
+                w += (velocity[j, k] - velocity[i, k]) * (pair_component(position, i, j, k) / r)
+            change = separation * (distance - r) / dt - w
+            if change <= 0.0:
+                continue
+            # Two moving particles share the change (equal masses: momentum kept); a
+            # fixed partner is infinitely heavy and i takes all of it.
+            share = 0.5 if moving[j] else 1.0
+            for k in range(d):
+                out[i, k] -= share * change * (pair_component(position, i, j, k) / r)
+    return out
+

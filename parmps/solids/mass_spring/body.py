@@ -42,8 +42,9 @@ import math
 import numpy as np
 
 from parmps.errors import CaseError
-from parmps.geometry.mesh import determinant_terms, enclosed_volume
-from parmps.solids.mass_spring.kernels import body_substeps, held_force_substeps, network_forces
+from parmps.geometry.mesh import determinant_terms, enclosed_moments, enclosed_volume
+from parmps.solids.mass_spring.kernels import (body_substeps, drag_kick, drag_prediction,
+                                              held_force_substeps, network_forces)
 from parmps.solids.mass_spring.statics import highest_frequency, stiffness_matrix
 from parmps.solids.mass_spring.surface import volume_gradient
 
@@ -281,6 +282,10 @@ class Body:
         self.rest_volume = self.volume() if len(self.facets) else 0.0
         self.volume_constraint = bool(volume_constraint) and self.rest_volume != 0.0
         self.fluid_force = np.zeros((n, d))
+        # The fluid's viscous drag, rate (target - v) per unit mass, taken implicitly in
+        # every substep's kicks (set_drag; 0 without a fluid).
+        self.drag_rate = np.zeros(n)
+        self.drag_target = np.zeros((n, d))
         self.acceleration = None  # set by the first force evaluation
         # Newton steps on the multiplier (see volume_multiplier); set by MassSpringModel.
         self.constraint_iterations = 0
@@ -331,10 +336,24 @@ class Body:
             return 0.0
         return (self.volume() - self.rest_volume) / self.rest_volume
 
+    def second_moment(self):
+        """int (x - c)(x - c)^T dV (d, d) of the enclosed region about its centre (zeros for
+        a body without a boundary): the shape a capsule's deformation is read from."""
+        if self.rest_volume == 0.0:
+            d = self.dimension
+            return np.zeros((d, d))
+        return enclosed_moments(self.position[self.surface_nodes], self.surface_facets)[2]
+
     def centroid(self):
         """Centre of mass of the (material) nodes."""
         m = self.n_material
         return self.mass[:m] @ self.position[:m] / self.mass[:m].sum()
+
+    def set_drag(self, rate, target):
+        """The drag ``m_i rate_i (target_i - v_i)`` [N] of the next advance: ``rate`` (n,)
+        [1/s], ``target`` (n, d) [m/s] (kernels.drag_kick); a pinned node feels none."""
+        self.drag_rate[:] = np.where(self.inverse_mass > 0.0, rate, 0.0)
+        self.drag_target[:] = target
 
     def total_fluid_force(self):
         return self.fluid_force.sum(axis=0)
@@ -390,25 +409,54 @@ class Body:
                        self.damping, self.axial_damping, force)
         if self.volume_constraint:
             nodes = self.surface_nodes
+            seen_velocity, seen_inverse_mass = velocity, self.inverse_mass
+            if self.drag_rate.any():
+                # Where the drag's kicks will put the nodes (kernels.drag_prediction): two
+                # half kicks inside the loop, one from a step's first evaluation.
+                seen_velocity, seen_inverse_mass = np.empty_like(velocity), np.empty(len(velocity))
+                drag_prediction(velocity, self.inverse_mass, self.drag_rate, self.drag_target,
+                                dt, 2 if kick == 1.0 else 1, seen_velocity, seen_inverse_mass)
+                kick = 1.0
             self.multiplier, gradient, steps = volume_multiplier(
-                self.position[nodes], self.surface_facets, self.rest_volume, velocity[nodes],
-                self.inverse_mass[nodes], force[nodes], dt, self.constraint_tolerance,
-                self.constraint_iterations, kick)
+                self.position[nodes], self.surface_facets, self.rest_volume,
+                seen_velocity[nodes], seen_inverse_mass[nodes], force[nodes], dt,
+                self.constraint_tolerance, self.constraint_iterations, kick)
             self.newton_steps = max(self.newton_steps, steps)
             # surface_nodes are unique, so plain fancy-index subtraction is safe.
             force[nodes] -= gradient * self.multiplier
         return force * self.inverse_mass[:, None]
 
     def advance(self, time, dt_outer, dt_sub):
-        """Run n = ceil(dt_outer/dt_sub) Verlet substeps from ``time``; return n."""
+        """Run n = ceil(dt_outer/dt_sub) Verlet substeps from ``time``; return n.
+
+        With a drag set (:meth:`set_drag`), ``fluid_force`` is the held part on entry and the
+        held part plus the step's mean drag on return: the drag at the nodes' mean velocity
+        over the step, their displacement over dt_outer."""
         n_sub = substep_count(dt_outer, dt_sub)
         h = dt_outer / n_sub
+        start = None
+        if self.drag_rate.any():
+            start = self.position.copy()
+            # The step's first kick feels a new drag: the first evaluation's multiplier is
+            # taken again for it (the last substep's predicted the old drag's position).
+            self.acceleration = None
         if self.membrane is not None:
-            return self.membrane.advance(self, time, h, n_sub)
+            # A stretched membrane takes more substeps than n_sub.
+            n_sub = self.membrane.advance(self, time, h, n_sub)
+        else:
+            self._substeps(time, h, n_sub)
+        if start is not None:
+            mean_velocity = (self.position - start) / dt_outer
+            self.fluid_force += (self.mass * self.drag_rate)[:, None] * (self.drag_target
+                                                                         - mean_velocity)
+        return n_sub
+
+    def _substeps(self, time, h, n_sub):
         if self.acceleration is None:
             # The first substep drifts by h v + h^2/2 a from the initial velocity.
             self.acceleration = self.acceleration_at(time, self.velocity, h, kick=0.5)
         position, velocity = self.position, self.velocity
+        rate, target = self.drag_rate, self.drag_target
         self.newton_steps = 0
         # Gravity and the fluid force are held over the step.
         held = self.mass[:, None] * self.gravity + self.fluid_force
@@ -417,7 +465,7 @@ class Body:
             # substep loop runs compiled (a stiff body takes ~1000 substeps a step).
             held_force_substeps(position, velocity, self.acceleration, self.inverse_mass,
                                 self.springs, self.rest_length, self.stiffness, self.damping,
-                                self.axial_damping, held, h, n_sub)
+                                self.axial_damping, held, h, n_sub, rate, target)
         elif self.compiled:
             # Loads and the constraint too: the same physics as acceleration_at.
             self.multiplier, self.newton_steps = body_substeps(
@@ -426,11 +474,10 @@ class Body:
                 self.load_field, self.load_start, self.load_end, self.load_ramp, time, h,
                 n_sub, self.volume_constraint, self.surface_nodes, self.surface_facets,
                 self.rest_volume, self.constraint_tolerance, self.constraint_iterations,
-                *self._determinant_terms)
+                *self._determinant_terms, rate, target)
         else:
             for step in range(n_sub):
-                velocity += 0.5 * h * self.acceleration
+                drag_kick(velocity, self.acceleration, rate, target, 0.5 * h)
                 position += h * velocity
                 self.acceleration = self.acceleration_at(time + (step + 1) * h, velocity, h)
-                velocity += 0.5 * h * self.acceleration
-        return n_sub
+                drag_kick(velocity, self.acceleration, rate, target, 0.5 * h)

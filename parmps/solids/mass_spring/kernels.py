@@ -22,7 +22,7 @@ def network_forces(position, velocity, springs, rest_length, stiffness, damping,
     ``-b (v_i - v_j)``. Any number of components d; in 2D the arithmetic is the
     same, operation for operation, as the 2D kernel this replaced.
     """
-    # d as a literal, so the component loops unroll (as parmps.core.kernels does): a 10k-node
+    # d as a literal, so the component loops unroll (as parmps.core.pairs does): a 10k-node
     # 3D body's spring forces took 1.7 times as long with d read from the array.
     if position.shape[1] == 2:
         _network_forces(position, velocity, springs, rest_length, stiffness, damping,
@@ -71,20 +71,64 @@ def _network_forces(position, velocity, springs, rest_length, stiffness, damping
 
 
 @numba.njit(cache=True)
+def drag_kick(velocity, acceleration, rate, target, half):
+    """A half kick ``v += half a`` with a drag ``rate (target - v)`` [1/s] on top, taken
+    backward Euler in v: ``v <- (v + half (a + rate target)) / (1 + half rate)``.
+
+    The drag is a node's viscous force towards its fluid neighbours' mean velocity (the
+    coupling's, :meth:`parmps.coupling.weak.WeakCoupling.node_forces`): it relaxes a node
+    far faster than a substep (``half rate`` of 3 or more), where an explicit drag would be
+    unstable; backward Euler damps that mode for any rate and keeps the steady slip
+    ``v - target = a / rate`` exact. A node of rate 0 gets the plain kick, bit for bit."""
+    n, d = velocity.shape
+    for k in range(n):
+        r = rate[k]
+        if r == 0.0:
+            for a in range(d):
+                velocity[k, a] += half * acceleration[k, a]
+        else:
+            scale = 1.0 / (1.0 + half * r)
+            for a in range(d):
+                velocity[k, a] = (velocity[k, a]
+                                  + half * (acceleration[k, a] + r * target[k, a])) * scale
+
+
+@numba.njit(cache=True)
+def drag_prediction(velocity, inverse_mass, rate, target, h, kicks, predicted_velocity,
+                    predicted_inverse_mass):
+    """The velocity and inverse mass with which ``x + h v' + h^2 w' F`` is the next
+    position under ``kicks`` (1 or 2) of :func:`drag_kick`'s half kicks, s = 1/(1 + h
+    rate/2): two (a substep's second and the next one's first) give v' = s^2 v + h (s^2 +
+    s)/2 rate target, w' = (s^2 + s)/2 w; one (a step's first substep, from the full-step
+    velocity) v' = s v + h s/2 rate target, w' = s/2 w. A constraint's multiplier predicts
+    from them (it zeroes the volume where the node will be)."""
+    n, d = velocity.shape
+    for k in range(n):
+        r = rate[k]
+        s = 1.0 / (1.0 + 0.5 * h * r)
+        grow = s * s if kicks == 2 else s
+        both = 0.5 * (s * s + s) if kicks == 2 else 0.5 * s
+        predicted_inverse_mass[k] = both * inverse_mass[k]
+        for a in range(d):
+            predicted_velocity[k, a] = grow * velocity[k, a] + h * both * r * target[k, a]
+
+
+@numba.njit(cache=True)
 def held_force_substeps(position, velocity, acceleration, inverse_mass, springs, rest_length,
-                        stiffness, damping, axial_damping, external, h, count):
+                        stiffness, damping, axial_damping, external, h, count, rate, target):
     """``count`` velocity-Verlet substeps of length h with the external force held.
 
     The body's own scheme (body.py): v += h/2 a; x += h v; a = M^-1 F(x, v_half); v += h/2 a,
-    in place on ``position``, ``velocity`` and ``acceleration`` (n, d). For bodies without a
-    volume constraint and without time-windowed loads, whose force depends on nothing else.
+    in place on ``position``, ``velocity`` and ``acceleration`` (n, d), each half kick with
+    the drag ``rate`` (n,) towards ``target`` (n, d) (:func:`drag_kick`). For bodies without
+    a volume constraint and without time-windowed loads, whose force depends on nothing else.
     """
     n, d = position.shape
     force = np.empty((n, d))
     for _ in range(count):
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
         for k in range(n):
             for axis in range(d):
-                velocity[k, axis] += 0.5 * h * acceleration[k, axis]
                 position[k, axis] += h * velocity[k, axis]
         force[:, :] = 0.0
         network_forces(position, velocity, springs, rest_length, stiffness, damping,
@@ -92,7 +136,7 @@ def held_force_substeps(position, velocity, acceleration, inverse_mass, springs,
         for k in range(n):
             for axis in range(d):
                 acceleration[k, axis] = (force[k, axis] + external[k, axis]) * inverse_mass[k]
-                velocity[k, axis] += 0.5 * h * acceleration[k, axis]
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
 
 
 # --------------------------------------------------------------------------
@@ -228,19 +272,23 @@ def load_factor(time, start, end, ramp):
 def body_substeps(position, velocity, acceleration, inverse_mass, springs, rest_length,
                   stiffness, damping, axial_damping, held, load_field, load_start, load_end,
                   load_ramp, time, h, count, constrained, nodes, facets, rest_volume,
-                  tolerance, iterations, permutations, signs, factorial):
+                  tolerance, iterations, permutations, signs, factorial, rate, target):
     """``count`` velocity-Verlet substeps from ``time`` of a body with windowed loads and/or
     the volume constraint: body.Body.acceleration_at's force (``held`` = gravity + fluid
     force, plus the loads at the substep's end, plus the springs, minus gradV lambda),
-    compiled. Returns (the last lambda, the most Newton steps of any substep)."""
+    compiled, each half kick with the drag ``rate`` towards ``target`` (:func:`drag_kick`).
+    Returns (the last lambda, the most Newton steps of any substep)."""
     n, d = position.shape
     force = np.empty((n, d))
     multiplier = 0.0
     most = 0
+    dragged = rate.shape[0] > 0 and rate.max() > 0.0
+    seen_velocity = np.empty((n, d))
+    seen_inverse_mass = np.empty(n)
     for step in range(count):
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
         for k in range(n):
             for a in range(d):
-                velocity[k, a] += 0.5 * h * acceleration[k, a]
                 position[k, a] += h * velocity[k, a]
         now = time + (step + 1) * h
         force[:, :] = held
@@ -253,12 +301,19 @@ def body_substeps(position, velocity, acceleration, inverse_mass, springs, rest_
         network_forces(position, velocity, springs, rest_length, stiffness, damping,
                        axial_damping, force)
         if constrained:
-            multiplier, steps = constrain(position, velocity, inverse_mass, force, nodes,
-                                          facets, rest_volume, h, tolerance, iterations,
-                                          permutations, signs, factorial)
+            if dragged:
+                drag_prediction(velocity, inverse_mass, rate, target, h, 2, seen_velocity,
+                                seen_inverse_mass)
+                multiplier, steps = constrain(position, seen_velocity, seen_inverse_mass,
+                                              force, nodes, facets, rest_volume, h, tolerance,
+                                              iterations, permutations, signs, factorial)
+            else:
+                multiplier, steps = constrain(position, velocity, inverse_mass, force, nodes,
+                                              facets, rest_volume, h, tolerance, iterations,
+                                              permutations, signs, factorial)
             most = max(most, steps)
         for k in range(n):
             for a in range(d):
                 acceleration[k, a] = force[k, a] * inverse_mass[k]
-                velocity[k, a] += 0.5 * h * acceleration[k, a]
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
     return multiplier, most

@@ -34,6 +34,7 @@ from scipy.sparse import linalg as sparse_linalg
 from parmps.config import Key
 from parmps.errors import CaseError, RunFailure
 from parmps.solids.mass_spring import membrane_kernels as kernels
+from parmps.solids.mass_spring.kernels import drag_prediction
 
 log = logging.getLogger(__name__)
 
@@ -401,11 +402,13 @@ class Membrane:
         """The acceleration of the very first substep (kick 1/2: body.volume_multiplier)."""
         force = self.force(body, time, body.velocity)
         gradients = np.empty((2,) + body.position.shape)
-        dt = h * math.sqrt(0.5)
+        # x + h v + h^2/2 a, or where one half kick with the fluid's drag puts the nodes.
+        velocity, inverse_mass = np.empty_like(body.velocity), np.empty(len(body.velocity))
+        drag_prediction(body.velocity, body.inverse_mass, body.drag_rate, body.drag_target, h,
+                        1, velocity, inverse_mass)
         self.multiplier, _ = kernels.constrain(
-            body.position, body.velocity / math.sqrt(0.5), body.inverse_mass, force,
-            self.triangles, self.rest, self.active, dt, body.constraint_tolerance,
-            body.constraint_iterations, gradients)
+            body.position, velocity, inverse_mass, force, self.triangles, self.rest,
+            self.active, h, body.constraint_tolerance, body.constraint_iterations, gradients)
         return force * body.inverse_mass[:, None]
 
     def stiffening(self, position):
@@ -448,7 +451,8 @@ class Membrane:
             self.damping, EXTENSION_LIMIT, self.quads, self.rest_cosine, self.rest_sine,
             self.kb, self.rest_area, self.local_modulus, self.drag, self.triangle_law(),
             self.triangles, self.rest,
-            self.active, body.constraint_tolerance, body.constraint_iterations)
+            self.active, body.constraint_tolerance, body.constraint_iterations,
+            body.drag_rate, body.drag_target)
         body.multiplier = float(self.multiplier[1])
         return count
 

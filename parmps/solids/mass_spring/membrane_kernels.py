@@ -8,6 +8,8 @@ membranes), tests/test_membrane.py.
 import numba
 import numpy as np
 
+from parmps.solids.mass_spring.kernels import drag_kick, drag_prediction
+
 
 @numba.njit(cache=True)
 def wlc_pow_tension(length, max_length, kbt_over_p, kp, exponent):
@@ -300,8 +302,9 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
                       load_start, load_end, load_ramp, time, h, count, edges, max_length, kp,
                       kbt_over_p, exponent, damping, limit, quads, rest_cosine, rest_sine, kb,
                       rest_area, local_modulus, drag, triangle_law, triangles, rest, active,
-                      tolerance, iterations):
-    """``count`` velocity-Verlet substeps of a membrane body (body.Body.advance's scheme).
+                      tolerance, iterations, rate, target):
+    """``count`` velocity-Verlet substeps of a membrane body (body.Body.advance's scheme),
+    each half kick with the fluid's drag ``rate`` towards ``target`` (kernels.drag_kick).
     Returns (the last multipliers (2,), the most Newton steps, the largest extension and
     its edge). A substep that takes an edge to ``limit`` ends the loop: the caller stops
     the run on it."""
@@ -313,10 +316,13 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
     most_extension = 0.0
     worst_edge = 0
     constrained = active[0] or active[1]
+    dragged = n > 0 and rate.max() > 0.0
+    seen_velocity = np.empty((n, 3))
+    seen_inverse_mass = np.empty(n)
     for step in range(count):
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
         for p in range(n):
             for m in range(3):
-                velocity[p, m] += 0.5 * h * acceleration[p, m]
                 position[p, m] += h * velocity[p, m]
         extension, edge = membrane_force(position, velocity, mass, held, load_field, load_start,
                                    load_end, load_ramp, time + (step + 1) * h, edges,
@@ -328,13 +334,22 @@ def membrane_substeps(position, velocity, acceleration, mass, inverse_mass, held
         if extension >= limit:
             break
         if constrained:
-            multiplier, steps = constrain(position, velocity, inverse_mass, force, triangles,
-                                          rest, active, h, tolerance, iterations, gradients)
+            if dragged:
+                # The multipliers predict where the drag's kicks will put the nodes.
+                drag_prediction(velocity, inverse_mass, rate, target, h, 2, seen_velocity,
+                                seen_inverse_mass)
+                multiplier, steps = constrain(position, seen_velocity, seen_inverse_mass,
+                                              force, triangles, rest, active, h, tolerance,
+                                              iterations, gradients)
+            else:
+                multiplier, steps = constrain(position, velocity, inverse_mass, force,
+                                              triangles, rest, active, h, tolerance,
+                                              iterations, gradients)
             most_steps = max(most_steps, steps)
         for p in range(n):
             for m in range(3):
                 acceleration[p, m] = force[p, m] * inverse_mass[p]
-                velocity[p, m] += 0.5 * h * acceleration[p, m]
+        drag_kick(velocity, acceleration, rate, target, 0.5 * h)
     return multiplier, most_steps, most_extension, worst_edge
 
 

@@ -54,7 +54,7 @@ class MassSpringModel(SolidModel):
         d = self.bodies[0].dimension if self.bodies else 2
         # Per body and step: name -> trailing shape.
         self.SERIES = {"volume_error": (), "fluid_force": (d,), "centroid": (d,),
-                       "newton_steps": ()}
+                       "second_moment": (d, d), "newton_steps": ()}
         if any(body.membrane is not None for body in self.bodies):
             self.SERIES["area_error"] = ()
         self.safety = float(safety)
@@ -126,10 +126,12 @@ class MassSpringModel(SolidModel):
         return dict(self.last_substep_counts)
 
     def diagnostics(self):
-        """Per body: volume_error, centroid (d,), fluid_force (d,) and newton_steps (the
+        """Per body: volume_error, centroid (d,), second_moment (d, d) of the enclosed region,
+        fluid_force (d,) and newton_steps (the
         most Newton steps on the volume multiplier any substep of the last step took)."""
         out = {body.name: {"volume_error": body.volume_error(),
                            "centroid": body.centroid(),
+                           "second_moment": body.second_moment(),
                            "fluid_force": body.total_fluid_force(),
                            "newton_steps": body.newton_steps}
                for body in self.bodies}
@@ -146,6 +148,9 @@ class MassSpringModel(SolidModel):
     def stability_limits(self):
         """Each body's Verlet step limit [s], as the substeps were chosen from it."""
         return dict(self.limits)
+
+    def set_drag(self, k, rate, target):
+        self.bodies[k].set_drag(rate, target)
 
     def advance_body(self, k, time, dt):
         body = self.bodies[k]
