@@ -297,19 +297,25 @@ def check_polyline(source, vertices, segments):
     return is_open
 
 
+def _meshio_read(path, source):
+    """The file read by meshio; what it cannot read is bad input, in one line."""
+    import meshio  # only meshes read files: a case without one does not import it
+
+    try:
+        return meshio.read(path)
+    # meshio reports unreadable files with many exception types; each is bad input.
+    except Exception as exc:  # noqa: BLE001
+        raise CaseError(f"{source}: cannot be read: "
+                        f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
+                        ) from None
+
+
 def read_polyline(path, source=None):
     """Vertices (n, 2) and line segments (m, 2) of a 2D curve in a mesh file meshio reads
     (Gmsh, VTK, ...: its ``line`` cells), its points in one plane z = constant; duplicates
     merged within MERGE_TOLERANCE of the median segment. Not checked: :func:`check_polyline`."""
-    import meshio
-
     source = source or f"mesh '{path}'"
-    try:
-        mesh = meshio.read(path)
-    except Exception as exc:  # noqa: BLE001 (meshio's many exception types: bad input)
-        raise CaseError(f"{source}: cannot be read: "
-                        f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
-                        ) from None
+    mesh = _meshio_read(path, source)
     points = np.asarray(mesh.points, dtype=float)
     if points.shape[1] == 3:
         if np.ptp(points[:, 2]) > 1e-9 * max(float(np.ptp(points[:, :2], axis=0).max()), 1e-300):
@@ -392,16 +398,8 @@ def read_mesh(path, source=None):
     VTK, ... through meshio), duplicates merged within MERGE_TOLERANCE of the median
     edge. ``source`` names the file in messages. The result is not checked: see
     :func:`check_closed_surface`."""
-    import meshio  # only shells read files: a case without one does not import it
-
     source = source or f"mesh '{path}'"
-    try:
-        mesh = meshio.read(path)
-    # meshio reports unreadable files with many exception types; each is bad input.
-    except Exception as exc:  # noqa: BLE001
-        raise CaseError(f"{source}: cannot be read: "
-                        f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
-                        ) from None
+    mesh = _meshio_read(path, source)
     points = np.asarray(mesh.points, dtype=float)
     if points.shape[1] == 2:
         raise CaseError(f"{source}: the points are 2D; a shell needs 3D points")
