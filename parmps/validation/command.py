@@ -87,6 +87,12 @@ def scalars(value):
     return None
 
 
+def run_settings(check, args):
+    """(end time, --set overrides) of a validation's runs: its own, ``--end-time`` first."""
+    end_time, sets = check.run_arguments(args.set)
+    return (args.end_time if args.end_time is not None else end_time), sets
+
+
 def run_beside(check, args, path):
     """The results of the other cases ``[run] beside`` names (keys of ``[other_cases]``),
     run as the validation's own case is, for a metric that compares with them
@@ -104,9 +110,7 @@ def run_beside(check, args, path):
             other = os.path.join(os.path.dirname(os.path.abspath(path)), os.pardir,
                                  f"{check.name}-{name}", "result.h5")
         else:
-            end_time, sets = check.run_arguments(args.set)
-            if args.end_time is not None:
-                end_time = args.end_time
+            end_time, sets = run_settings(check, args)
             folder = os.path.abspath(os.path.join(args.output, f"{check.name}-{name}"))
             other = launch.run(check.other_cases[name], folder, sets, end_time,
                                ranks=args.ranks, timeout=args.timeout,
@@ -150,9 +154,7 @@ def validate_one(check, args):
         from parmps.result import result_path
         path = result_path(args.result)
     else:
-        end_time, sets = check.run_arguments(args.set)
-        if args.end_time is not None:
-            end_time = args.end_time
+        end_time, sets = run_settings(check, args)
         out = os.path.abspath(os.path.join(args.output, check.name))
         run = launch.run(check.case_path, out, sets, end_time, ranks=args.ranks,
                          timeout=args.timeout, root=validation.ROOT)
