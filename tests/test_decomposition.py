@@ -130,7 +130,7 @@ def _case(lower, upper, **parallel):
 
 def test_every_registered_decomposition_implements_the_interface():
     from mpi4py import MPI
-    from parmps.parallel import DECOMPOSITIONS, decomposition_class
+    from parmps.parallel import DECOMPOSITIONS, create_decomposition, decomposition_class
     from parmps.parallel.base import Decomposition
     assert set(DECOMPOSITIONS) >= {"slabs", "blocks"}
     for name in DECOMPOSITIONS:
@@ -138,7 +138,8 @@ def test_every_registered_decomposition_implements_the_interface():
         assert issubclass(cls, Decomposition) and cls.name == name
         assert not cls.__abstractmethods__, (name, cls.__abstractmethods__)
         for dimension in (2, 3):
-            made = cls(MPI.COMM_WORLD, _case([0.0] * dimension, [30.0] * dimension))
+            made = create_decomposition(MPI.COMM_WORLD, _case([0.0] * dimension,
+                                                              [30.0] * dimension), name)
             assert made.neighbours == [] and made.describe()
             lower, upper = made.box(0)
             assert lower.shape == upper.shape == (dimension,)
@@ -152,10 +153,10 @@ def test_a_dry_wall_weighs_as_a_dummy():
     two search radii: no pair list, P = 0) as the dummy it then costs as."""
     from mpi4py import MPI
     from parmps.core.particles import DUMMY, FLUID, WALL, Particles
-    from parmps.parallel import decomposition_class
-    made = decomposition_class("slabs")(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0],
-                                                             wall_weight=0.7,
-                                                             dummy_weight=0.2))
+    from parmps.parallel import create_decomposition
+    made = create_decomposition(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0],
+                                                      wall_weight=0.7, dummy_weight=0.2),
+                                "slabs")
     kind = np.array([FLUID, WALL, WALL, DUMMY, DUMMY])
     particles = Particles({"id": np.arange(5), "kind": kind, "position": np.zeros((5, 2)),
                            "dry": np.array([0, 0, 1, 0, 1])})
@@ -170,14 +171,14 @@ def test_only_a_cut_blind_to_dry_walls_makes_the_first_check_special(name):
     weighed: after it the first check is like any other (the imbalance tolerance)."""
     from mpi4py import MPI
     from parmps.core.particles import FLUID, WALL, Particles
-    from parmps.parallel import decomposition_class
+    from parmps.parallel import create_decomposition
     from parmps.parallel.base import FIRST_CUT_TOLERANCE
     excess = 2 * (FIRST_CUT_TOLERANCE - 1.0)
     loads = np.array([1.0 + excess, 1.0 - excess])
     position = np.column_stack([np.linspace(1.0, 29.0, 6), np.full(6, 5.0)])
     for dry, expected in ((np.array([0, 0, 0, 0, 1, 1]), None),
                           (np.zeros(6), "weighed the walls before they were known dry")):
-        made = decomposition_class(name)(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0]))
+        made = create_decomposition(MPI.COMM_WORLD, _case([0.0, 0.0], [30.0, 30.0]), name)
         assert FIRST_CUT_TOLERANCE < loads.max() / loads.mean() < made.imbalance_tolerance
         scene = Particles({"id": np.arange(6), "kind": np.array([FLUID] * 4 + [WALL] * 2),
                            "position": position, "dry": dry.astype(np.int8)})
@@ -225,9 +226,30 @@ def test_auto_chooses_and_says_why(ranks, upper, expected):
 def test_a_grid_that_does_not_fit_is_refused_in_one_line():
     from mpi4py import MPI
     from parmps.errors import CaseError
-    from parmps.parallel import decomposition_class
-    blocks = decomposition_class("blocks")
+    from parmps.parallel import create_decomposition
     with pytest.raises(CaseError, match="product must be the rank count"):
-        blocks(MPI.COMM_WORLD, _case([0, 0], [30, 30], decomposition="blocks", grid=[2, 2]))
-    made = blocks(MPI.COMM_WORLD, _case([0, 0], [30, 30], decomposition="blocks", grid=[1, 1]))
+        create_decomposition(MPI.COMM_WORLD, _case([0, 0], [30, 30], decomposition="blocks",
+                                                   grid=[2, 2]))
+    made = create_decomposition(MPI.COMM_WORLD, _case([0, 0], [30, 30],
+                                                      decomposition="blocks", grid=[1, 1]))
     assert made.grid == (1, 1)
+
+
+def test_a_decomposition_is_given_its_domain_halo_and_balance_not_a_case():
+    """The decomposition's arguments are objects (the Devito distributor's way): built
+    from them alone it cuts as the one the case makes."""
+    from mpi4py import MPI
+    from parmps.geometry.domain import Domain
+    from parmps.parallel import create_decomposition, decomposition_class
+    from parmps.parallel.base import Balance, Halo
+    case = _case([0.0, 0.0], [30.0, 30.0])
+    from_case = create_decomposition(MPI.COMM_WORLD, case, "slabs")
+    domain = Domain([0.0, 0.0], [30.0, 30.0])
+    halo = Halo(from_case.reach, from_case.margin, from_case.halo_width, from_case.min_width)
+    balance = Balance(0.5, 0.25, 20, 1.2)
+    made = decomposition_class("slabs")(MPI.COMM_WORLD, domain, halo, balance)
+    assert made.halo_width == from_case.halo_width
+    np.testing.assert_array_equal(made.box(0)[0], from_case.box(0)[0])
+    assert made.rebalance_interval == 20 and made.imbalance_tolerance == 1.2
+    from parmps.core.particles import DUMMY, FLUID, WALL
+    np.testing.assert_allclose(made.kind_weight[[FLUID, WALL, DUMMY]], [1.0, 0.5, 0.25])

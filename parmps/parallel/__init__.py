@@ -23,19 +23,30 @@ def decomposition_class(name):
     return registry.load(DECOMPOSITIONS, name)
 
 
-def create_decomposition(comm, case):
-    """The case's decomposition on ``comm`` (collective); "auto" chooses with
-    :func:`choose_decomposition`. Which one runs, and why, is logged once the scene is
-    distributed (:meth:`Decomposition.log_choice`): a case refused while its scene is
-    built gets its one line of error alone."""
-    name = case["parallel"].get("decomposition", "auto")
-    why = "parallel.decomposition"
-    if name == "auto" and case["parallel"].get("grid"):
+def create_decomposition(comm, case, name=None):
+    """The case's decomposition on ``comm`` (collective), or the one registered as
+    ``name``; "auto" chooses with :func:`choose_decomposition`. The one place the case's
+    domain, halo and ``[parallel]`` settings are read for it: the decomposition is given
+    them as objects. Which one runs, and why, is logged once the scene is distributed
+    (:meth:`Decomposition.log_choice`): a case refused while its scene is built gets its
+    one line of error alone."""
+    from parmps.geometry.domain import Domain
+    from parmps.parallel.base import balance_settings, halo_widths
+    parallel = case["parallel"]
+    why = "parallel.decomposition" if name is None else "asked for"
+    name = name or parallel.get("decomposition", "auto")
+    if name == "auto" and parallel.get("grid"):
         name, why = "blocks", "auto: parallel.grid is set"
     elif name == "auto":
         name, reason = choose_decomposition(comm.size, case)
         why = f"auto: {reason}"
-    decomposition = decomposition_class(name)(comm, case)
+    domain, halo = Domain.from_case(case), halo_widths(case)
+    if domain.is_periodic:
+        domain.check_lattice(case["particles"]["spacing"], case["particles"]["origin"],
+                             halo.width)
+    cls = decomposition_class(name)
+    options = {key: parallel.get(key) for key in cls.options}
+    decomposition = cls(comm, domain, halo, balance_settings(parallel), **options)
     decomposition.choice = (name, why)
     return decomposition
 

@@ -54,7 +54,6 @@ from mpi4py import MPI
 from parmps.core.particles import DUMMY, KIND_NAMES, WALL
 from parmps.core.particles import FIELDS, Particles
 from parmps.core.settings import search_radius
-from parmps.geometry.domain import Domain
 from parmps.parallel.exchange import field_arrays, imbalance_of, sorted_by_id
 from parmps.parallel.periodic import PeriodicImages
 
@@ -69,6 +68,17 @@ FIRST_CUT_TOLERANCE = 1.02
 
 
 Halo = collections.namedtuple("Halo", "reach margin width min_width")
+
+#: How a decomposition weighs and rebalances its load: a wall's and a dummy's work in
+#: fluid particles', the steps between load checks, the imbalance (max / mean) it accepts.
+Balance = collections.namedtuple(
+    "Balance", "wall_weight dummy_weight rebalance_interval imbalance_tolerance")
+
+
+def balance_settings(parallel):
+    """The :class:`Balance` of a case's ``[parallel]`` section."""
+    return Balance(float(parallel["wall_weight"]), float(parallel["dummy_weight"]),
+                   int(parallel["rebalance_interval"]), float(parallel["imbalance_tolerance"]))
 
 
 def halo_widths(case):
@@ -90,29 +100,31 @@ class Decomposition(abc.ABC):
     #: the name the case chooses it by (``parallel.decomposition``)
     name = None
 
-    def __init__(self, comm, case):
+    #: the ``[parallel]`` keys beyond the balance's that its constructor takes
+    options = ()
+
+    def __init__(self, comm, domain, halo, balance):
+        """On ``comm``, over ``domain`` (a :class:`parmps.geometry.domain.Domain`), with
+        ``halo`` (:class:`Halo`) and ``balance`` (:class:`Balance`) as given: a
+        decomposition reads no case."""
         self.comm = comm
         self.size = comm.size
         self.rank = comm.rank
-        spacing = float(case["particles"]["spacing"])
-        self.spacing = spacing
-        self.domain = Domain.from_case(case)
+        self.domain = domain
         self.lower, self.upper = self.domain.lower, self.domain.upper
         self.dimension = self.domain.dimension
-        parallel = case["parallel"]
-        self.reach, self.margin, self.halo_width, self.min_width = halo_widths(case)
+        self.reach, self.margin, self.halo_width, self.min_width = halo
         self.images = None
         if self.domain.is_periodic:
-            self.domain.check_lattice(spacing, case["particles"]["origin"], self.halo_width)
             self.images = PeriodicImages(comm, self.domain, self.halo_width)
         # Balance is by work, not count: each particle weighs its kind's cost.
         self.kind_weight = np.ones(max(KIND_NAMES) + 1)
-        self.kind_weight[WALL] = parallel["wall_weight"]
-        self.kind_weight[DUMMY] = parallel["dummy_weight"]
+        self.kind_weight[WALL] = balance.wall_weight
+        self.kind_weight[DUMMY] = balance.dummy_weight
         # Work a rank carries beyond its particles, in particle weights (set_extra_work).
         self.extra_work = np.zeros(self.size)
-        self.rebalance_interval = int(parallel["rebalance_interval"])
-        self.imbalance_tolerance = float(parallel["imbalance_tolerance"])
+        self.rebalance_interval = balance.rebalance_interval
+        self.imbalance_tolerance = balance.imbalance_tolerance
         self.halo_seconds = 0.0
         self.migration_seconds = 0.0
         self.rebalance_count = 0

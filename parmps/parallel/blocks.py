@@ -68,9 +68,12 @@ class BlockDecomposition(Decomposition):
 
     name = "blocks"
 
-    def __init__(self, comm, case):
-        super().__init__(comm, case)
-        grid = case["parallel"].get("grid") or None
+    options = ("grid",)
+
+    def __init__(self, comm, domain, halo, balance, grid=None):
+        """``grid``: the rank grid (``parallel.grid``), or None to choose one."""
+        super().__init__(comm, domain, halo, balance)
+        grid = grid or None
         self.fixed_grid = grid is not None
         if grid is not None:
             self._check_grid(grid)

@@ -73,8 +73,8 @@ class SlabDecomposition(Decomposition):
 
     name = "slabs"
 
-    def __init__(self, comm, case):
-        super().__init__(comm, case)
+    def __init__(self, comm, domain, halo, balance):
+        super().__init__(comm, domain, halo, balance)
         self.cart = comm.Create_cart([comm.size], periods=[False], reorder=False)
         self.left, self.right = self.cart.Shift(0, 1)
         self.min_slab_width = self.min_width

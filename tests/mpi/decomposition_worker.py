@@ -23,7 +23,7 @@ import numpy as np
 from mpi4py import MPI
 
 from parmps import config, schema
-from parmps.parallel import decomposition_class
+from parmps.parallel import create_decomposition
 from parmps.parallel.exchange import by_id_blocks
 from parmps.errors import CaseError
 from parmps.core.particles import DUMMY, FLUID, WALL, Particles
@@ -57,7 +57,7 @@ def make_case(lower_x, upper_x, setup="slabs", **parallel):
 
 
 def build_decomposition(comm, case):
-    return decomposition_class(case["parallel"]["decomposition"])(comm, case)
+    return create_decomposition(comm, case, case["parallel"]["decomposition"])
 
 
 def scene(position, kind=None):
@@ -117,7 +117,7 @@ def check_ownership(comm, decomposition, particles, n_total, what):
 def check_distribute_counts(comm):
     """Known lattices give known per-rank counts and edges between columns."""
     expected = {1: [120], 2: [60, 60], 3: [40, 40, 40]}
-    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 24.0))
+    decomposition = create_decomposition(comm, make_case(0.0, 24.0), "slabs")
     mine = decomposition.distribute(scene(lattice(24, 5)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
@@ -129,7 +129,7 @@ def check_distribute_counts(comm):
     check_ownership(comm, decomposition, mine, 120, "24x5 lattice")
     # 25 columns of 4: the edges go to the column gap nearest each quantile.
     expected = {1: [100], 2: [48, 52], 3: [32, 36, 32]}
-    decomposition = decomposition_class("slabs")(comm, make_case(0.0, 25.0))
+    decomposition = create_decomposition(comm, make_case(0.0, 25.0), "slabs")
     mine = decomposition.distribute(scene(lattice(25, 4)))
     if comm.size in expected:
         counts = list(decomposition.counts(mine))
