@@ -406,3 +406,28 @@ def test_every_registered_scheme_runs_the_3d_dam_break(tmp_path, key, name):
     assert np.isfinite(position).all() and np.isfinite(pressure).all()
     # The water column 0.55 m deep: its floor reads about rho g H.
     assert 0.5 * 1000 * 9.81 * 0.55 < pressure.max() < 3 * 1000 * 9.81 * 0.55
+
+
+@pytest.mark.parametrize("open_top, periodic", [(True, []), (False, []), (True, ["y"])])
+def test_the_memory_estimate_counts_a_tanks_walls_as_the_scene_lays_them(open_top, periodic):
+    """The estimate's tank is the scene's own tank geometry (geometry.scene.tank_material):
+    its wall and dummy count is the built one's exactly, open or closed, and a periodic
+    axis the tank spans has no walls across it in either."""
+    from parmps.run.resources import particle_estimate
+    top = "true" if open_top else "false"
+    case = _validate(f"""
+[domain]
+lower = [-0.1, {0.0 if periodic else -0.1}, -0.1]
+upper = [0.3, {0.16 if periodic else 0.26}, 0.5]
+periodic = {json.dumps(periodic)}
+[particles]
+spacing = 0.02
+[time]
+end = 0.1
+[[tank]]
+lower = [0.0, 0.0, 0.0]
+upper = [0.2, 0.16, 0.3]
+open_top = {top}
+""")
+    built = scene.build(case)[0]
+    assert particle_estimate(case) == pytest.approx(len(built.position), rel=1e-9)

@@ -1,14 +1,18 @@
 """What a case will ask of the machine, known before anything is allocated.
 
-The particle count comes from the case's geometry alone (each fluid block,
-tank and wall box is a rectangle of the lattice), so a case that would need
-more memory than the machine has is refused with a sentence instead of dying
-in an allocation.
+The particle count comes from the case's geometry alone (each fluid block and
+wall box is a rectangle of the lattice, a tank its walls' boxes, a shaped wall a
+band about its bounding box), so a case that would need more memory than the
+machine has is refused with a sentence instead of dying in an allocation.
 """
 
 import math
 import os
 
+import numpy as np
+
+from parmps.geometry.domain import Domain
+from parmps.geometry.scene import tank_material
 from parmps.geometry.walls import shape_bounds
 
 
@@ -46,13 +50,13 @@ def particle_estimate(case):
             thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
             area += math.prod(u - l + 2 * thick for u, l in zip(box[1], box[0])) - \
                 math.prod(max(u - l - 2 * thick, 0.0) for u, l in zip(box[1], box[0]))
+    domain = Domain.from_case(case)
     for spec in case.get("tank", ()):
-        thick = (spec["wall_layers"] + spec["dummy_layers"]) * spacing
-        inner = [u - l for u, l in zip(spec["upper"], spec["lower"])]
-        # The walls' outer box, less the inner box (the roof's layers when closed).
-        outer = [e + 2 * thick for e in inner[:-1]] + \
-            [inner[-1] + thick * (1 if spec["open_top"] else 2)]
-        area += math.prod(outer) - math.prod(inner)
+        # The walls' outer box (the tank's own geometry), less the inner box.
+        boxes = [(np.asarray(spec["lower"]), np.asarray(spec["upper"]))] + \
+            [(lower, upper) for lower, upper, _ in tank_material(spec, spacing, domain)]
+        outer = np.max([u for _, u in boxes], axis=0) - np.min([l for l, _ in boxes], axis=0)
+        area += math.prod(outer) - math.prod(np.subtract(spec["upper"], spec["lower"]))
     for spec in case.get("wall_box", ()):
         area += math.prod(u - l for u, l in zip(spec["upper"], spec["lower"]))
     for spec in case.get("inlet", ()):
